@@ -1,0 +1,24 @@
+// Owning handles for MuJoCo models/data, loading with errors that name the file.
+#pragma once
+
+#include <mujoco/mujoco.h>
+
+#include <memory>
+#include <string>
+
+namespace spml {
+
+struct ModelDeleter { void operator()(mjModel* m) const { mj_deleteModel(m); } };
+struct DataDeleter { void operator()(mjData* d) const { mj_deleteData(d); } };
+using ModelPtr = std::unique_ptr<mjModel, ModelDeleter>;
+using DataPtr = std::unique_ptr<mjData, DataDeleter>;
+
+// Loads an MJCF file; throws std::runtime_error with MuJoCo's message and the path.
+ModelPtr load_mjcf(const std::string& path);
+inline DataPtr make_data(const mjModel* m) { return DataPtr(mj_makeData(m)); }
+
+// Directory holding the project's MJCF models: $SPML_MJCF_DIR, else the source tree's mjcf/.
+std::string mjcf_dir();
+std::string mjcf_path(const std::string& file);   // mjcf_dir()/file
+
+}  // namespace spml

@@ -1,0 +1,163 @@
+// Helpers shared by the force plugins shipped with spml: configuration parsing and a
+// template that turns a small C++ class into the C descriptor of force_plugin.h, so each
+// plugin source holds only its physics.
+//
+// An effect class provides:
+//   static const char* const kName, kDescription; static const char* const kKeys[] (NULL-ended)
+//   explicit Effect(const EffectConfig&)            (throws std::invalid_argument on bad values)
+//   void compute(const mjModel*, const mjData*, mjtNum* qfrc) const
+//   std::vector<std::string> names; std::vector<double> theta;   (the parameter vector)
+// and optionally
+//   static constexpr bool kLinear = true; void regressor(const mjModel*, const mjtNum* qpos, const mjtNum* qvel, mjtNum* R) const
+//   static constexpr bool kStateful = true; void advance(const mjModel*, const mjData*, mjtNum dt); void reset()
+#pragma once
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "spml/force_plugin.h"
+
+namespace spml::effects {
+
+struct Joint {
+  std::string name;
+  int id, qpos, dof;
+};
+
+class EffectConfig {
+ public:
+  EffectConfig(const mjModel* m, const int* joints, int njoint, const char* const* keys,
+               const char* const* values, int nkv) {
+    for (int i = 0; i < njoint; ++i) {
+      int j = joints[i];
+      if (m->jnt_type[j] != mjJNT_HINGE && m->jnt_type[j] != mjJNT_SLIDE)
+        throw std::invalid_argument("joint '" + std::string(mj_id2name(m, mjOBJ_JOINT, j)) +
+                                    "' is not a hinge or slide joint");
+      this->joints.push_back({mj_id2name(m, mjOBJ_JOINT, j), j, m->jnt_qposadr[j], m->jnt_dofadr[j]});
+    }
+    for (int i = 0; i < nkv; ++i) kv_.emplace_back(keys[i], values[i]);
+  }
+
+  bool has(const std::string& key) const {
+    for (auto& [k, v] : kv_) if (k == key) return true;
+    return false;
+  }
+
+  // A list of numbers; `expect` entries (a single value is broadcast), or any count if 0.
+  std::vector<double> list(const std::string& key, size_t expect = 0) const {
+    const std::string* text = find(key);
+    if (!text) throw std::invalid_argument("missing required key '" + key + "'");
+    std::vector<double> out;
+    size_t pos = 0;
+    while (pos <= text->size()) {
+      size_t comma = text->find(',', pos);
+      std::string item = text->substr(pos, comma == std::string::npos ? std::string::npos : comma - pos);
+      char* end = nullptr;
+      double v = std::strtod(item.c_str(), &end);
+      if (item.empty() || *end != '\0' || !std::isfinite(v))
+        throw std::invalid_argument("key '" + key + "': '" + item + "' is not a finite number");
+      out.push_back(v);
+      if (comma == std::string::npos) break;
+      pos = comma + 1;
+    }
+    if (expect && out.size() == 1) out.assign(expect, out[0]);
+    if (expect && out.size() != expect)
+      throw std::invalid_argument("key '" + key + "': expected 1 or " + std::to_string(expect) + " values, got " +
+                                  std::to_string(out.size()));
+    return out;
+  }
+  std::vector<double> per_joint(const std::string& key) const { return list(key, joints.size()); }
+  double number(const std::string& key) const { return list(key, 1)[0]; }
+  double number(const std::string& key, double fallback) const { return has(key) ? number(key) : fallback; }
+
+  std::vector<Joint> joints;
+
+ private:
+  const std::string* find(const std::string& key) const {
+    for (auto& [k, v] : kv_) if (k == key) return &v;
+    return nullptr;
+  }
+  std::vector<std::pair<std::string, std::string>> kv_;
+};
+
+inline void require(bool ok, const std::string& what) {
+  if (!ok) throw std::invalid_argument(what);
+}
+
+// Sign with optional tanh smoothing (width > 0): friction laws use it so that a
+// simulation with a finite step does not chatter around zero velocity.
+inline double smooth_sign(double v, double width) {
+  if (width > 0) return std::tanh(v / width);
+  return v > 0 ? 1.0 : (v < 0 ? -1.0 : 0.0);
+}
+
+template <class E, class = void> struct is_linear : std::false_type {};
+template <class E> struct is_linear<E, std::void_t<decltype(E::kLinear)>> : std::bool_constant<E::kLinear> {};
+template <class E, class = void> struct is_stateful : std::false_type {};
+template <class E> struct is_stateful<E, std::void_t<decltype(E::kStateful)>> : std::bool_constant<E::kStateful> {};
+
+template <class E>
+const spmlForcePlugin* make_descriptor() {
+  static const spmlForcePlugin d = [] {
+    spmlForcePlugin p{};
+    p.abi_version = SPML_FORCE_PLUGIN_ABI;
+    p.name = E::kName;
+    p.description = E::kDescription;
+    p.keys = E::kKeys;
+    p.create = [](const mjModel* m, const int* joints, int njoint, const char* const* keys,
+                  const char* const* values, int nkv, char* err, int errlen) -> void* {
+      try {
+        return new E(EffectConfig(m, joints, njoint, keys, values, nkv));
+      } catch (const std::exception& e) {
+        std::snprintf(err, static_cast<size_t>(errlen), "%s", e.what());
+        return nullptr;
+      }
+    };
+    p.destroy = [](void* inst) { delete static_cast<E*>(inst); };
+    p.compute = [](const void* inst, const mjModel* m, const mjData* d, mjtNum* qfrc) {
+      static_cast<const E*>(inst)->compute(m, d, qfrc);
+    };
+    if constexpr (is_stateful<E>::value) {
+      p.advance = [](void* inst, const mjModel* m, const mjData* d, mjtNum dt) { static_cast<E*>(inst)->advance(m, d, dt); };
+      p.reset = [](void* inst) { static_cast<E*>(inst)->reset(); };
+    }
+    p.nparam = [](const void* inst) { return static_cast<int>(static_cast<const E*>(inst)->theta.size()); };
+    p.param_name = [](const void* inst, int i) { return static_cast<const E*>(inst)->names.at(i).c_str(); };
+    p.get_params = [](const void* inst, mjtNum* out) {
+      auto& th = static_cast<const E*>(inst)->theta;
+      for (size_t i = 0; i < th.size(); ++i) out[i] = th[i];
+    };
+    p.set_params = [](void* inst, const mjtNum* in) {
+      auto& th = static_cast<E*>(inst)->theta;
+      for (size_t i = 0; i < th.size(); ++i) th[i] = in[i];
+    };
+    if constexpr (is_linear<E>::value) {
+      p.regressor = [](const void* inst, const mjModel* m, const mjtNum* qpos, const mjtNum* qvel, mjtNum* R) {
+        static_cast<const E*>(inst)->regressor(m, qpos, qvel, R);
+      };
+    }
+    return p;
+  }();
+  return &d;
+}
+
+// Linear effects compute their force as R * theta, so force and regressor cannot disagree.
+template <class E>
+void compute_linear(const E& e, const mjModel* m, const mjData* d, mjtNum* qfrc) {
+  const int np = static_cast<int>(e.theta.size());
+  std::vector<mjtNum> R(static_cast<size_t>(m->nv) * np, 0.0);
+  e.regressor(m, d->qpos, d->qvel, R.data());
+  for (int r = 0; r < m->nv; ++r)
+    for (int c = 0; c < np; ++c) qfrc[r] += R[static_cast<size_t>(r) * np + c] * e.theta[c];
+}
+
+}  // namespace spml::effects
+
+#define SPML_EXPORT_FORCE_PLUGIN(Effect)                                             \
+  extern "C" __attribute__((visibility("default"))) const spmlForcePlugin* spml_force_plugin(void) { \
+    return spml::effects::make_descriptor<Effect>();                                 \
+  }

@@ -1,0 +1,28 @@
+// viscous: velocity-proportional friction -fv * qd per joint.
+#include "effect_base.h"
+
+namespace spml::effects {
+
+struct Viscous {
+  static constexpr const char* kName = "viscous";
+  static constexpr const char* kDescription = "viscous friction -fv*qd per joint; linear in fv";
+  static constexpr const char* kKeys[] = {"fv", nullptr};
+  static constexpr bool kLinear = true;
+
+  explicit Viscous(const EffectConfig& c) : joints(c.joints) {
+    theta = c.per_joint("fv");
+    for (auto& j : joints) names.push_back(j.name + ".fv");
+  }
+  void regressor(const mjModel*, const mjtNum*, const mjtNum* qvel, mjtNum* R) const {
+    const int np = static_cast<int>(theta.size());
+    for (int i = 0; i < np; ++i) R[joints[i].dof * np + i] = -qvel[joints[i].dof];
+  }
+  void compute(const mjModel* m, const mjData* d, mjtNum* qfrc) const { compute_linear(*this, m, d, qfrc); }
+
+  std::vector<Joint> joints;
+  std::vector<std::string> names;
+  std::vector<double> theta;
+};
+
+}  // namespace spml::effects
+SPML_EXPORT_FORCE_PLUGIN(spml::effects::Viscous)

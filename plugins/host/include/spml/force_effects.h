@@ -1,0 +1,106 @@
+// Loading and running force plugins declared in an MJCF model.
+//
+// Declaration (MuJoCo 2.2.2 has no <extension>/<plugin> element, so spml uses custom text):
+//   <custom>
+//     <text name="spml.plugin.band" data="type=friction_band joints=shoulder lower=0.15 upper=0.25 level=60"/>
+//   </custom>
+// Every <text> whose name starts with "spml.plugin." declares one instance (the rest of the
+// name is the instance name). `type` picks the plugin, `joints` lists the MJCF joints it acts
+// on (comma-separated), every other key=value goes to the plugin. Unknown plugins, unknown
+// keys, bad values and missing joints are errors naming the element.
+#pragma once
+
+#include <mujoco/mujoco.h>
+
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "spml/force_plugin.h"
+
+namespace spml {
+
+class PluginError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+struct PluginDeclaration {
+  std::string element;    // e.g. <custom><text name="spml.plugin.band">
+  std::string instance;   // "band"
+  std::string type;       // "friction_band"
+  std::vector<std::string> joints;
+  std::vector<std::pair<std::string, std::string>> config;   // everything but type/joints
+};
+
+// Parses the declarations of a compiled model; `source` (the MJCF path) prefixes messages.
+std::vector<PluginDeclaration> parse_plugin_declarations(const mjModel* m, const std::string& source);
+
+// Where plugin libraries are looked for, in order: directories in $SPML_PLUGIN_PATH
+// (colon-separated), then the build tree's plugin folder, then the install folder.
+std::vector<std::string> plugin_search_path();
+
+// A loaded plugin library (kept loaded for the life of the process).
+const spmlForcePlugin& load_force_plugin(const std::string& type, const std::string& element = "");
+// Names of all plugins found on the search path.
+std::vector<std::string> available_force_plugins();
+
+// The plugin instances of one model. While attached, MuJoCo's passive-force callback adds
+// their forces for this model (and only this model) in every mj_step/mj_forward/mj_inverse.
+class ForceEffects {
+ public:
+  ForceEffects(const mjModel* m, const std::string& source);
+  ~ForceEffects();
+  ForceEffects(const ForceEffects&) = delete;
+  ForceEffects& operator=(const ForceEffects&) = delete;
+
+  struct Instance {
+    PluginDeclaration decl;
+    const spmlForcePlugin* plugin;
+    void* state;
+    int param_offset, nparam;
+  };
+
+  const std::vector<Instance>& instances() const { return instances_; }
+  bool empty() const { return instances_.empty(); }
+
+  void attach();   // start contributing through mjcb_passive
+  void detach();   // stop; also done by the destructor
+  bool attached() const { return attached_; }
+
+  // Adds all instances' forces into qfrc (nv) for the state in d.
+  void compute(const mjData* d, mjtNum* qfrc) const;
+  // Steps internal states; call after every integrator step.
+  void advance(const mjData* d, double dt);
+  void reset();
+
+  // Parameter vector of all instances, names "<instance>.<plugin parameter>".
+  int nparam() const { return nparam_; }
+  std::vector<std::string> param_names() const;
+  Eigen::VectorXd params() const;
+  void set_params(const Eigen::VectorXd& theta);
+
+  // Regressor of the instances that are linear: force = R * theta_linear with R of size
+  // nv x (sum of their nparam); `linear_names` lists the columns. Nonlinear instances are
+  // skipped (listed by nonlinear_instances()).
+  Eigen::MatrixXd linear_regressor(const mjtNum* qpos, const mjtNum* qvel) const;
+  std::vector<std::string> linear_names() const;
+  std::vector<std::string> nonlinear_instances() const;
+
+  const mjModel* model() const { return m_; }
+
+ private:
+  const mjModel* m_;
+  std::vector<Instance> instances_;
+  int nparam_ = 0;
+  bool attached_ = false;
+};
+
+// mj_step followed by advancing the plugin states.
+void step(const mjModel* m, mjData* d, ForceEffects& effects);
+
+}  // namespace spml

@@ -1,0 +1,343 @@
+#include "spml/dataset.h"
+
+#include <H5Cpp.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <filesystem>
+#include <sstream>
+
+namespace spml {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string quote(const std::string& s) { return "'" + s + "'"; }
+
+// ---- string attributes (variable-length UTF-8 on write; both kinds on read) ----
+
+void write_string_attr(H5::H5Object& obj, const std::string& name, const std::string& value) {
+  H5::StrType type(H5::PredType::C_S1, H5T_VARIABLE);
+  type.setCset(H5T_CSET_UTF8);
+  H5::Attribute attr = obj.createAttribute(name, type, H5::DataSpace(H5S_SCALAR));
+  const char* data = value.c_str();
+  attr.write(type, &data);
+}
+
+std::string read_string_attr(const H5::Attribute& attr, const std::string& where) {
+  H5::DataType type = attr.getDataType();
+  if (type.getClass() != H5T_STRING)
+    throw DatasetError(where + ": attribute " + quote(attr.getName()) + " must be a string");
+  H5::StrType stype = attr.getStrType();
+  std::string value;
+  attr.read(stype, value);   // the C++ API handles fixed and variable length here
+  while (!value.empty() && value.back() == '\0') value.pop_back();
+  return value;
+}
+
+bool has_attr(const H5::H5Object& obj, const std::string& name) { return obj.attrExists(name); }
+
+// ---- matrices ----
+
+void write_matrix(H5::Group& group, const std::string& name, const RowMatrix& m,
+                  const std::vector<std::string>& columns) {
+  hsize_t dims[2] = {static_cast<hsize_t>(m.rows()), static_cast<hsize_t>(m.cols())};
+  H5::DataSet ds = group.createDataSet(name, H5::PredType::IEEE_F64LE, H5::DataSpace(2, dims));
+  if (m.size() > 0) ds.write(m.data(), H5::PredType::NATIVE_DOUBLE);
+  write_string_attr(ds, "columns", join_list(columns));
+}
+
+void write_vector(H5::Group& group, const std::string& name, const Eigen::VectorXd& v) {
+  hsize_t dims[1] = {static_cast<hsize_t>(v.size())};
+  H5::DataSet ds = group.createDataSet(name, H5::PredType::IEEE_F64LE, H5::DataSpace(1, dims));
+  if (v.size() > 0) ds.write(v.data(), H5::PredType::NATIVE_DOUBLE);
+}
+
+void require_numeric(const H5::DataSet& ds, const std::string& where) {
+  H5T_class_t cls = ds.getTypeClass();
+  if (cls != H5T_FLOAT && cls != H5T_INTEGER)
+    throw DatasetError(where + ": must hold numbers (float64), found a non-numeric type");
+}
+
+RowMatrix read_matrix(const H5::Group& group, const std::string& name, const std::string& where,
+                      std::vector<std::string>& columns) {
+  if (!group.nameExists(name)) throw DatasetError(where + ": dataset " + quote(name) + " is missing");
+  const std::string here = where + ": dataset " + quote(name);
+  H5::DataSet ds = group.openDataSet(name);
+  require_numeric(ds, here);
+  H5::DataSpace space = ds.getSpace();
+  int rank = space.getSimpleExtentNdims();
+  if (rank != 2)
+    throw DatasetError(here + ": must be 2-D [rows, columns], found rank " + std::to_string(rank));
+  hsize_t dims[2];
+  space.getSimpleExtentDims(dims);
+  RowMatrix m(static_cast<Eigen::Index>(dims[0]), static_cast<Eigen::Index>(dims[1]));
+  if (m.size() > 0) {
+    try {
+      ds.read(m.data(), H5::PredType::NATIVE_DOUBLE);
+    } catch (const H5::Exception& e) {
+      throw DatasetError(here + ": read failed (file truncated or corrupt?): " + e.getDetailMsg());
+    }
+  }
+  if (!has_attr(ds, "columns"))
+    throw DatasetError(here + ": attribute 'columns' is missing (comma-separated column names)");
+  columns = split_list(read_string_attr(ds.openAttribute("columns"), here));
+  if (static_cast<Eigen::Index>(columns.size()) != m.cols())
+    throw DatasetError(here + ": attribute 'columns' names " + std::to_string(columns.size()) +
+                       " columns but the dataset has " + std::to_string(m.cols()));
+  return m;
+}
+
+Eigen::VectorXd read_vector(const H5::Group& group, const std::string& name, const std::string& where) {
+  const std::string here = where + ": dataset " + quote(name);
+  H5::DataSet ds = group.openDataSet(name);
+  require_numeric(ds, here);
+  H5::DataSpace space = ds.getSpace();
+  if (space.getSimpleExtentNdims() != 1) throw DatasetError(here + ": must be 1-D");
+  hsize_t n;
+  space.getSimpleExtentDims(&n);
+  Eigen::VectorXd v(static_cast<Eigen::Index>(n));
+  try {
+    if (n > 0) ds.read(v.data(), H5::PredType::NATIVE_DOUBLE);
+  } catch (const H5::Exception& e) {
+    throw DatasetError(here + ": read failed (file truncated or corrupt?): " + e.getDetailMsg());
+  }
+  return v;
+}
+
+// Names of the child groups of `loc` in creation order when the file tracks it, else by name.
+std::vector<std::string> child_groups(hid_t loc) {
+  unsigned flags = 0;
+  hid_t gcpl = H5Gget_create_plist(loc);
+  if (gcpl >= 0) {
+    H5Pget_link_creation_order(gcpl, &flags);
+    H5Pclose(gcpl);
+  }
+  H5_index_t index = (flags & H5P_CRT_ORDER_INDEXED) ? H5_INDEX_CRT_ORDER : H5_INDEX_NAME;
+  std::vector<std::string> names;
+  auto visit = [](hid_t group, const char* name, const H5L_info_t*, void* out) -> herr_t {
+    H5O_info_t info;
+    if (H5Oget_info_by_name(group, name, &info, H5P_DEFAULT) >= 0 && info.type == H5O_TYPE_GROUP)
+      static_cast<std::vector<std::string>*>(out)->push_back(name);
+    return 0;
+  };
+  hsize_t idx = 0;
+  if (H5Literate(loc, index, H5_ITER_INC, &idx, visit, &names) < 0)
+    throw DatasetError("cannot list the groups (file truncated or corrupt?)");
+  return names;
+}
+
+void check_finite(const RowMatrix& m, const std::vector<std::string>& columns, const std::string& where) {
+  std::vector<Eigen::Index> bad_rows;
+  std::string first_column;
+  for (Eigen::Index r = 0; r < m.rows(); ++r) {
+    for (Eigen::Index c = 0; c < m.cols(); ++c) {
+      if (!std::isfinite(m(r, c))) {
+        if (bad_rows.empty()) first_column = c < static_cast<Eigen::Index>(columns.size()) ? columns[c] : "?";
+        bad_rows.push_back(r);
+        break;
+      }
+    }
+  }
+  if (bad_rows.empty()) return;
+  std::ostringstream msg;
+  msg << where << ": non-finite values (NaN/Inf) in " << bad_rows.size() << " row(s): ";
+  for (size_t i = 0; i < bad_rows.size() && i < 10; ++i) msg << (i ? ", " : "") << bad_rows[i];
+  if (bad_rows.size() > 10) msg << ", ...";
+  msg << " (first in column " << quote(first_column) << ")";
+  throw DatasetError(msg.str());
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------
+
+std::vector<std::string> split_list(const std::string& text, char sep) {
+  std::vector<std::string> out;
+  if (text.empty()) return out;
+  std::string item;
+  std::istringstream in(text);
+  while (std::getline(in, item, sep)) {
+    auto b = item.find_first_not_of(" \t");
+    auto e = item.find_last_not_of(" \t\r\n");
+    out.push_back(b == std::string::npos ? "" : item.substr(b, e - b + 1));
+  }
+  if (!text.empty() && text.back() == sep) out.push_back("");
+  return out;
+}
+
+std::string join_list(const std::vector<std::string>& items, char sep) {
+  std::string out;
+  for (size_t i = 0; i < items.size(); ++i) {
+    if (i) out += sep;
+    out += items[i];
+  }
+  return out;
+}
+
+int Split::x_index(const std::string& column) const {
+  for (size_t i = 0; i < x_columns.size(); ++i)
+    if (x_columns[i] == column) return static_cast<int>(i);
+  return -1;
+}
+int Split::y_index(const std::string& column) const {
+  for (size_t i = 0; i < y_columns.size(); ++i)
+    if (y_columns[i] == column) return static_cast<int>(i);
+  return -1;
+}
+
+const Split* Dataset::find(const std::string& split) const {
+  for (const auto& s : splits)
+    if (s.name == split) return &s;
+  return nullptr;
+}
+
+const Split& Dataset::get(const std::string& split) const {
+  if (const Split* s = find(split)) return *s;
+  std::string have;
+  for (const auto& s : splits) have += (have.empty() ? "" : ", ") + s.name;
+  throw DatasetError("no split " + quote(split) + " (the file has: " + have + ")");
+}
+
+void validate(const Dataset& ds, const std::string& where, const ReadOptions& options) {
+  if (ds.splits.empty()) throw DatasetError(where + ": contains no split groups");
+  for (const Split& s : ds.splits) {
+    const std::string g = where + ": group " + quote(s.name);
+    if (s.name.empty() || s.name == "model") throw DatasetError(g + ": not a valid split name");
+    if (static_cast<Eigen::Index>(s.x_columns.size()) != s.X.cols())
+      throw DatasetError(g + ": dataset 'X': attribute 'columns' names " + std::to_string(s.x_columns.size()) +
+                         " columns but the dataset has " + std::to_string(s.X.cols()));
+    if (static_cast<Eigen::Index>(s.y_columns.size()) != s.Y.cols())
+      throw DatasetError(g + ": dataset 'Y': attribute 'columns' names " + std::to_string(s.y_columns.size()) +
+                         " columns but the dataset has " + std::to_string(s.Y.cols()));
+    if (s.X.rows() != s.Y.rows())
+      throw DatasetError(g + ": X has " + std::to_string(s.X.rows()) + " rows but Y has " +
+                         std::to_string(s.Y.rows()));
+    if (s.X.rows() == 0) throw DatasetError(g + ": split is empty (0 rows)");
+    if (s.X.cols() == 0) throw DatasetError(g + ": dataset 'X' has no columns");
+    if (s.Y.cols() == 0) throw DatasetError(g + ": dataset 'Y' has no columns");
+    if (s.t.size() != 0 && s.t.size() != s.X.rows())
+      throw DatasetError(g + ": dataset 't' has " + std::to_string(s.t.size()) + " entries but X has " +
+                         std::to_string(s.X.rows()) + " rows");
+    if (!options.allow_nonfinite) {
+      check_finite(s.X, s.x_columns, g + ": dataset 'X'");
+      check_finite(s.Y, s.y_columns, g + ": dataset 'Y'");
+    }
+  }
+  const ModelInfo& m = ds.model;
+  const auto M = static_cast<Eigen::Index>(m.param_names.size());
+  if ((m.prior.size() && m.prior.size() != M) || (m.truth.size() && m.truth.size() != M))
+    throw DatasetError(where + ": group 'model': prior/truth length differs from the " +
+                       std::to_string(M) + " parameter names");
+}
+
+Dataset read_dataset(const std::string& path, const ReadOptions& options) {
+  H5::Exception::dontPrint();
+  if (!fs::exists(path)) throw DatasetError(path + ": no such file");
+  if (fs::is_directory(path)) throw DatasetError(path + ": is a directory, not a dataset file");
+  htri_t is_hdf5 = H5Fis_hdf5(path.c_str());
+  if (is_hdf5 <= 0) throw DatasetError(path + ": not an HDF5 file (or truncated / corrupt)");
+
+  Dataset out;
+  try {
+    H5::H5File file;
+    try {
+      file.openFile(path, H5F_ACC_RDONLY);
+    } catch (const H5::Exception&) {
+      throw DatasetError(path + ": cannot be opened as HDF5 (truncated or corrupt?)");
+    }
+    H5::Group root = file.openGroup("/");
+    if (!has_attr(root, "format"))
+      throw DatasetError(path + ": root attribute 'format' is missing (expected \"" + kFormatName + "\")");
+    std::string format = read_string_attr(root.openAttribute("format"), path);
+    if (format != kFormatName) {
+      if (format.rfind("spml/", 0) == 0)
+        throw DatasetError(path + ": format version " + quote(format) + " is not supported (this reader knows " +
+                           kFormatName + ")");
+      throw DatasetError(path + ": root attribute 'format' is " + quote(format) + ", not \"" + kFormatName + "\"");
+    }
+    for (int i = 0; i < root.getNumAttrs(); ++i) {
+      H5::Attribute a = root.openAttribute(static_cast<unsigned>(i));
+      if (a.getName() == "format" || a.getTypeClass() != H5T_STRING) continue;
+      out.provenance[a.getName()] = read_string_attr(a, path);
+    }
+    std::vector<std::string> groups;
+    try {
+      groups = child_groups(root.getId());
+    } catch (const DatasetError& e) {
+      throw DatasetError(path + ": " + e.what());
+    }
+    for (const std::string& name : groups) {
+      H5::Group g = root.openGroup(name);
+      const std::string where = path + ": group " + quote(name);
+      if (name == "model") {
+        ModelInfo& m = out.model;
+        if (has_attr(g, "name")) m.name = read_string_attr(g.openAttribute("name"), where);
+        if (has_attr(g, "param_names")) m.param_names = split_list(read_string_attr(g.openAttribute("param_names"), where));
+        if (has_attr(g, "mjcf_path")) m.mjcf_path = read_string_attr(g.openAttribute("mjcf_path"), where);
+        if (has_attr(g, "mjcf_xml")) m.mjcf_xml = read_string_attr(g.openAttribute("mjcf_xml"), where);
+        if (g.nameExists("prior")) m.prior = read_vector(g, "prior", where);
+        if (g.nameExists("truth")) m.truth = read_vector(g, "truth", where);
+        continue;
+      }
+      Split s;
+      s.name = name;
+      s.X = read_matrix(g, "X", where, s.x_columns);
+      s.Y = read_matrix(g, "Y", where, s.y_columns);
+      if (g.nameExists("t")) s.t = read_vector(g, "t", where);
+      out.splits.push_back(std::move(s));
+    }
+  } catch (const H5::Exception& e) {
+    throw DatasetError(path + ": HDF5 error (truncated or corrupt file?): " + e.getFuncName() + ": " +
+                       e.getDetailMsg());
+  }
+  validate(out, path, options);
+  return out;
+}
+
+void write_dataset(const std::string& path, const Dataset& ds) {
+  H5::Exception::dontPrint();
+  validate(ds, path, ReadOptions{});
+  fs::path target(path);
+  if (target.has_parent_path() && !fs::exists(target.parent_path()))
+    throw DatasetError(path + ": directory " + target.parent_path().string() + " does not exist");
+  const std::string tmp = path + ".tmp-" + std::to_string(::getpid());
+  try {
+    // Track creation order so splits read back in the order they were written.
+    H5::FileCreatPropList fcpl;
+    H5Pset_link_creation_order(fcpl.getId(), H5P_CRT_ORDER_TRACKED | H5P_CRT_ORDER_INDEXED);
+    H5::H5File file(tmp, H5F_ACC_TRUNC, fcpl);
+    H5::Group root = file.openGroup("/");
+    write_string_attr(root, "format", kFormatName);
+    for (const auto& [key, value] : ds.provenance)
+      if (key != "format") write_string_attr(root, key, value);
+    for (const Split& s : ds.splits) {
+      H5::Group g = file.createGroup("/" + s.name);
+      write_matrix(g, "X", s.X, s.x_columns);
+      write_matrix(g, "Y", s.Y, s.y_columns);
+      if (s.t.size()) write_vector(g, "t", s.t);
+    }
+    if (!ds.model.empty()) {
+      const ModelInfo& m = ds.model;
+      H5::Group g = file.createGroup("/model");
+      write_string_attr(g, "name", m.name);
+      write_string_attr(g, "param_names", join_list(m.param_names));
+      if (!m.mjcf_path.empty()) write_string_attr(g, "mjcf_path", m.mjcf_path);
+      if (!m.mjcf_xml.empty()) write_string_attr(g, "mjcf_xml", m.mjcf_xml);
+      if (m.prior.size()) write_vector(g, "prior", m.prior);
+      if (m.truth.size()) write_vector(g, "truth", m.truth);
+    }
+    file.close();
+    fs::rename(tmp, path);
+  } catch (const H5::Exception& e) {
+    std::error_code ec;
+    fs::remove(tmp, ec);
+    throw DatasetError(path + ": write failed: " + e.getDetailMsg());
+  } catch (...) {
+    std::error_code ec;
+    fs::remove(tmp, ec);
+    throw;
+  }
+}
+
+}  // namespace spml

@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# Installs the Debian 12 packages spml needs to build, test and run its tools.
+# Idempotent: packages already installed are skipped, and apt is not touched at all
+# when nothing is missing. Pass --with-torch to add LibTorch (only for torch learners).
+set -euo pipefail
+
+packages=(
+  build-essential cmake pkg-config ccache
+  libmujoco-dev libqhull-dev          # MuJoCo 2.2.2; its CMake config needs qhull's headers
+  libeigen3-dev libnlopt-cxx-dev
+  libhdf5-dev libmatio-dev
+  libsvm-dev libcli11-dev nlohmann-json3-dev
+  libgtest-dev libgmock-dev libbenchmark-dev
+  python3-h5py python3-numpy python3-scipy python3-sklearn python3-matplotlib
+)
+for arg in "$@"; do
+  case "$arg" in
+    --with-torch) packages+=(libtorch-dev) ;;
+    *) echo "install-deps.sh: unknown option '$arg'" >&2; exit 2 ;;
+  esac
+done
+
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "install-deps: all ${#packages[@]} packages present"
+  exit 0
+fi
+echo "install-deps: installing ${missing[*]}"
+SUDO=""
+[ "$(id -u)" -eq 0 ] || SUDO="sudo"
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -q
+$SUDO apt-get install -y -q --no-install-recommends "${missing[@]}"
