@@ -42,19 +42,19 @@ Rollout simulate(const mjModel* sim, ForceEffects& effects, const mjModel* prior
                  std::mt19937_64& rng, const GenerateOptions& options, const std::string& stage) {
   const double h = sim->opt.timestep;
   const int steps = static_cast<int>(std::lround(kDuration / h));
-  const int n = steps + 2;   // one extra sample each side for central differences
+  const int n = steps + 2 * signals::kEdge;   // extra samples each side for the differences
   DataPtr d = make_data(sim), dc = make_data(prior);
   Reference ref{offset0};
   double qr[3], qdr[3], qddr[3];
   // Start on the reference so the controller has no transient to catch up.
-  ref.at(-h, qr, qdr, qddr);
+  ref.at(-signals::kEdge * h, qr, qdr, qddr);
   for (int i = 0; i < 3; ++i) { d->qpos[i] = qr[i]; d->qvel[i] = qdr[i]; }
   effects.reset();
   std::uniform_real_distribution<double> noise(-kNoise, kNoise);
   Eigen::MatrixXd qm(n, 3), tau(n, 3);
   Eigen::VectorXd t(n);
   for (int k = 0; k < n; ++k) {
-    double time = (k - 1) * h;
+    double time = (k - signals::kEdge) * h;
     ref.at(time, qr, qdr, qddr);
     // Computed-torque control with the prior model (mj_inverse on the prior MJCF), on the
     // simulator's state; the sensor noise only enters the recorded data.
@@ -76,12 +76,13 @@ Rollout simulate(const mjModel* sim, ForceEffects& effects, const mjModel* prior
   Rollout r;
   Eigen::MatrixXd qd, qdd;
   signals::central_differences(qm, h, qd, qdd);
-  // Drop the two edge samples that have no central difference.
-  r.q = qm.middleRows(1, steps);
-  r.qd = qd.middleRows(1, steps);
-  r.qdd = qdd.middleRows(1, steps);
-  r.tau = tau.middleRows(1, steps);
-  r.t = t.segment(1, steps);
+  // Drop the edge samples that have no full difference stencil.
+  const int e = signals::kEdge;
+  r.q = qm.middleRows(e, steps);
+  r.qd = qd.middleRows(e, steps);
+  r.qdd = qdd.middleRows(e, steps);
+  r.tau = tau.middleRows(e, steps);
+  r.t = t.segment(e, steps);
   return r;
 }
 
@@ -150,7 +151,7 @@ Dataset generate_simdyn(bool global_mismatch, const GenerateOptions& options) {
   ds.provenance["scenario"] = label;
   ds.provenance["plugins"] = declarations_text(effects);
   ds.provenance["controller"] = "computed torque with mjcf/planar_arm3_prior.xml, kp=3947.8 kd=125.7, 1 kHz";
-  ds.provenance["sensor"] = "q + uniform(+-1e-6 rad); qd, qdd by central differences at 1 kHz";
+  ds.provenance["sensor"] = "q + uniform(+-1e-6 rad); qd, qdd by central differences applied twice at 1 kHz";
   ds.provenance["sampling"] = "train: first 50 s of offset 0 every 10th sample (100 Hz); test_interp: last 50 s of offset 0; "
                               "test_extrap: last 50 s of offset 0.3; test stride " + std::to_string(ts);
   return ds;

@@ -10,8 +10,8 @@ const Eigen::Vector4d kTheta(2.0, -1.5, 3.0, 2.4);
 constexpr double kNoise = 0.5;
 constexpr int kTrain = 400, kTest = 400;
 // The paper only says "strong (but local and smooth) deviation around x = 2.5". A Gaussian
-// bump of height 6 and width 0.4 puts LLS near the paper's 1.29 / 1.63 RMSE; see README.
-constexpr double kBumpHeight = 6.0, kBumpCenter = 2.5, kBumpWidth = 0.4;
+// bump of height 8 and width 0.22 puts LLS near the paper's 1.29 / 1.63 RMSE; see README.
+constexpr double kBumpHeight = 8.0, kBumpCenter = 2.5, kBumpWidth = 0.22;
 }  // namespace
 
 Eigen::Vector4d toy_features(double x) { return {std::sin(2 * x), x, 1.0, 0.09 * x * x}; }
@@ -53,7 +53,7 @@ Dataset generate_toy(const GenerateOptions& options) {
   ds.model.param_names = {"sin2x", "x", "1", "0.09x2"};
   ds.model.prior = Eigen::Vector4d::Zero();   // the paper starts SPGP from zeros
   ds.model.truth = kTheta;
-  ds.provenance["deviation"] = "gaussian bump height=6 center=2.5 width=0.4";
+  ds.provenance["deviation"] = "gaussian bump height=8 center=2.5 width=0.22";
   ds.provenance["noise_std"] = "0.5";
   return ds;
 }

@@ -39,7 +39,7 @@ Dataset generate_via(bool autoregressive, const GenerateOptions& options) {
 
   const double h = m->opt.timestep;
   const int sub = static_cast<int>(std::lround(1.0 / (kRecordRate * h)));
-  const int records = static_cast<int>(kDuration * kRecordRate) + 2;
+  const int records = static_cast<int>(kDuration * kRecordRate) + 2 * signals::kEdge;
   signals::Chirp chirp{0.0, 3.0, kDuration};
   std::mt19937_64 rng(options.seed);
   std::uniform_real_distribution<double> enc(-kEncoderNoise, kEncoderNoise);
@@ -72,8 +72,9 @@ Dataset generate_via(bool autoregressive, const GenerateOptions& options) {
   Eigen::MatrixXd rate, unused;
   signals::central_differences(defl, 1.0 / kRecordRate, rate, unused);
   // Drop the undifferentiable edges, then average blocks of 10 (1 kHz -> 100 Hz).
-  Eigen::MatrixXd raw(records - 2, 3);
-  raw << defl.middleRows(1, records - 2), rate.middleRows(1, records - 2), tau.middleRows(1, records - 2);
+  const int e = signals::kEdge, kept = records - 2 * e;
+  Eigen::MatrixXd raw(kept, 3);
+  raw << defl.middleRows(e, kept), rate.middleRows(e, kept), tau.middleRows(e, kept);
   Eigen::MatrixXd slow = signals::block_average(raw, kResample);
   const Eigen::Index n = slow.rows() - kHistory;   // rows with a full history
   const int lags = autoregressive ? kHistory + 1 : 1;
@@ -95,7 +96,7 @@ Dataset generate_via(bool autoregressive, const GenerateOptions& options) {
       all.X(i, 2 * l + 1) = slow(k - l, 1);
     }
     all.Y(i, 0) = slow(k, 2);
-    all.t[i] = (k + 0.5) * kResample / kRecordRate;
+    all.t[i] = (k * kResample + 0.5 * (kResample - 1) + e) / kRecordRate;   // block centre
   }
   const Eigen::Index cut = static_cast<Eigen::Index>(std::lround(kTrainFraction * n));
   Dataset ds;
