@@ -1,0 +1,128 @@
+// The spml binary end to end: info on files written by an independent program (h5py), every
+// kind of bad input rejected with a message naming it and a non-zero exit, import.
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "test_util.h"
+
+using spml::test::run;
+using spml::test::spml_bin;
+
+namespace {
+
+std::filesystem::path fixtures() {
+  static std::filesystem::path dir = [] {
+    auto d = spml::test::temp_dir("h5py");
+    auto r = run("/usr/bin/python3 " SPML_TEST_PY_DIR "/make_h5py_fixtures.py " + d.string());
+    EXPECT_EQ(r.exit_code, 0) << r.output;
+    return d;
+  }();
+  return dir;
+}
+
+void expect_rejected(const std::string& file, const std::string& message) {
+  auto path = (fixtures() / file).string();
+  auto r = run(spml_bin() + " info " + path);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("spml: error: " + path + ": " + message), std::string::npos)
+      << "expected '" << message << "' in:\n" << r.output;
+}
+
+}  // namespace
+
+TEST(CliInfo, ReadsFileWrittenByH5py) {
+  auto r = run(spml_bin() + " info --json " + (fixtures() / "good.h5").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  auto j = nlohmann::json::parse(r.output);
+  ASSERT_EQ(j["splits"].size(), 1u);
+  const auto& cols = j["splits"][0]["X"]["columns"];
+  EXPECT_EQ(cols[0]["name"], "q:j0");
+  EXPECT_DOUBLE_EQ(cols[0]["mean"].get<double>(), 4.5);            // mean of 0..9
+  EXPECT_DOUBLE_EQ(cols[1]["max"].get<double>(), 81.0);            // 9^2
+  EXPECT_NEAR(cols[0]["std"].get<double>(), 3.0276503540974917, 1e-12);
+  EXPECT_EQ(j["model"]["name"], "custom");
+  EXPECT_EQ(j["provenance"]["scenario"], "h5py-fixture");
+  auto text = run(spml_bin() + " info " + (fixtures() / "good.h5").string());
+  EXPECT_EQ(text.exit_code, 0);
+  EXPECT_NE(text.output.find("split 'train': 10 rows"), std::string::npos) << text.output;
+}
+
+TEST(CliInfo, RejectsNonHdf5) { expect_rejected("not_hdf5.h5", "not an HDF5 file (or truncated / corrupt)"); }
+TEST(CliInfo, RejectsTruncated) { expect_rejected("truncated.h5", ""); }
+TEST(CliInfo, RejectsMissingFormat) { expect_rejected("no_format.h5", "root attribute 'format' is missing"); }
+TEST(CliInfo, RejectsUnknownVersion) { expect_rejected("bad_version.h5", "format version 'spml/2' is not supported"); }
+TEST(CliInfo, RejectsMissingX) { expect_rejected("missing_x.h5", "group 'train': dataset 'X' is missing"); }
+TEST(CliInfo, RejectsMissingY) { expect_rejected("missing_y.h5", "group 'train': dataset 'Y' is missing"); }
+TEST(CliInfo, RejectsRowMismatch) { expect_rejected("rows_differ.h5", "group 'train': X has 10 rows but Y has 9"); }
+TEST(CliInfo, RejectsColumnCountMismatch) {
+  expect_rejected("columns_mismatch.h5", "group 'train': dataset 'X': attribute 'columns' names 3 columns but the dataset has 2");
+}
+TEST(CliInfo, RejectsNonFiniteNamingRows) {
+  expect_rejected("nonfinite.h5", "group 'train': dataset 'X': non-finite values (NaN/Inf) in 2 row(s): 3, 7");
+  auto r = run(spml_bin() + " info --allow-nonfinite " + (fixtures() / "nonfinite.h5").string());
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+}
+TEST(CliInfo, RejectsEmptySplit) { expect_rejected("empty_split.h5", "group 'train': split is empty (0 rows)"); }
+TEST(CliInfo, TruncatedMessageSaysSo) {
+  auto r = run(spml_bin() + " info " + (fixtures() / "truncated.h5").string());
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("truncated"), std::string::npos) << r.output;
+}
+
+TEST(CliGenerate, H5pyReadsWhatSpmlWrites) {
+  auto dir = spml::test::temp_dir("gen-h5py");
+  auto file = (dir / "toy.h5").string();
+  auto g = run(spml_bin() + " generate --scenario toy --seed 3 -q --out " + file);
+  ASSERT_EQ(g.exit_code, 0) << g.output;
+  auto r = run("/usr/bin/python3 " SPML_TEST_PY_DIR "/read_spml_with_h5py.py " + file);
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("h5py read OK"), std::string::npos) << r.output;
+  std::filesystem::remove_all(dir);
+}
+
+TEST(CliGenerate, UnknownScenarioIsAnError) {
+  auto r = run(spml_bin() + " generate --scenario nope --out /tmp/x.h5");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.output.find("nope"), std::string::npos) << r.output;
+}
+
+TEST(CliImport, CsvRoundTripThroughInfo) {
+  auto dir = spml::test::temp_dir("import");
+  std::ofstream((dir / "d.csv").string()) << "time,angle,torque\n0,0.1,1\n0.01,0.2,2\n0.02,0.3,3\n0.03,0.4,4\n";
+  auto out = (dir / "d.h5").string();
+  auto r = run(spml_bin() + " import " + (dir / "d.csv").string() + " --x q:j=angle --y tau:j=torque --t time "
+               "--split train:0:3 --split test:3: -o " + out);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  auto info = run(spml_bin() + " info --json " + out);
+  auto j = nlohmann::json::parse(info.output);
+  EXPECT_EQ(j["splits"][0]["rows"], 3);
+  EXPECT_EQ(j["splits"][1]["rows"], 1);
+  EXPECT_DOUBLE_EQ(j["splits"][1]["Y"]["columns"][0]["mean"].get<double>(), 4.0);
+  auto bad = run(spml_bin() + " import " + (dir / "d.csv").string() + " --x nothere --y torque -o " + out + ".2");
+  EXPECT_EQ(bad.exit_code, 1);
+  EXPECT_NE(bad.output.find("no column 'nothere' (available: time, angle, torque)"), std::string::npos) << bad.output;
+  EXPECT_FALSE(std::filesystem::exists(out + ".2"));
+  std::filesystem::remove_all(dir);
+}
+
+// Real measurements from ../shared (never committed): MATLAB v5 import via matio.
+TEST(CliImport, EmpsMatFile) {
+  const char* env = std::getenv("SPML_EMPS_DIR");
+  std::filesystem::path dir = env ? env : SPML_SOURCE_DIR "/../shared/data/emps";
+  auto mat = dir / "DATA_EMPS.mat";
+  if (!std::filesystem::exists(mat)) GTEST_SKIP() << "EMPS data not found at " << mat << " (set SPML_EMPS_DIR)";
+  auto tmp = spml::test::temp_dir("emps");
+  auto out = (tmp / "emps.h5").string();
+  auto r = run(spml_bin() + " import " + mat.string() + " --x q:carriage=qm --y force:carriage=vir*gtau --t t -o " + out);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  auto info = nlohmann::json::parse(run(spml_bin() + " info --json " + out).output);
+  EXPECT_EQ(info["splits"][0]["rows"], 24841);   // the benchmark's documented record length
+  // Force = 35.15 N/V * controller output, within the drive's +-10 V saturation.
+  double fmax = info["splits"][0]["Y"]["columns"][0]["max"].get<double>();
+  EXPECT_GT(fmax, 0.0);
+  EXPECT_LE(fmax, 351.5 + 1e-9);
+  std::filesystem::remove_all(tmp);
+}

@@ -1,0 +1,195 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <complex>
+#include <fstream>
+
+#include "spml/envs/mujoco_model.h"
+#include "spml/force_effects.h"
+#include "test_util.h"
+
+using namespace spml;
+
+namespace {
+
+// Two free hinges "a" and "b" with unit inertia, no gravity, plus the given <custom> body.
+std::string write_model(const std::string& name, const std::string& custom) {
+  auto dir = test::temp_dir("plugins");
+  auto path = (dir / (name + ".xml")).string();
+  std::ofstream(path) << R"(<mujoco model=")" << name << R"(">
+  <option timestep="0.001" gravity="0 0 0"/>
+  <worldbody>
+    <body name="A"><joint name="a" type="hinge" axis="0 0 1"/><inertial pos="0 0 0" mass="1" diaginertia="1 1 1"/></body>
+    <body name="B"><joint name="b" type="hinge" axis="0 0 1"/><inertial pos="0 0 0" mass="1" diaginertia="1 1 1"/></body>
+  </worldbody>
+  <custom>)" << custom << R"(</custom>
+</mujoco>)";
+  return path;
+}
+
+std::string decl(const std::string& instance, const std::string& data) {
+  return "<text name=\"spml.plugin." + instance + "\" data=\"" + data + "\"/>";
+}
+
+struct Loaded {
+  std::string path;
+  ModelPtr m;
+  DataPtr d;
+  std::unique_ptr<ForceEffects> fx;
+  explicit Loaded(const std::string& custom, const std::string& name = "m")
+      : path(write_model(name, custom)), m(load_mjcf(path)), d(make_data(m.get())),
+        fx(std::make_unique<ForceEffects>(m.get(), path)) {}
+  Eigen::Vector2d force(double qa, double qb, double va, double vb) {
+    d->qpos[0] = qa; d->qpos[1] = qb; d->qvel[0] = va; d->qvel[1] = vb;
+    Eigen::Vector2d f = Eigen::Vector2d::Zero();
+    fx->compute(d.get(), f.data());
+    return f;
+  }
+  // For linear plugins the regressor times the parameters must give the force.
+  void expect_regressor_consistent(double qa, double qb, double va, double vb) {
+    Eigen::Vector2d f = force(qa, qb, va, vb);
+    Eigen::MatrixXd R = fx->linear_regressor(d->qpos, d->qvel);
+    EXPECT_LT((R * fx->params() - f).norm(), 1e-12);
+  }
+};
+
+std::string error_of(const std::string& custom) {
+  try {
+    Loaded l(custom);
+    return "";
+  } catch (const std::exception& e) {
+    return e.what();
+  }
+}
+
+}  // namespace
+
+TEST(ForcePlugins, ClosedForms) {
+  Loaded c(decl("dry", "type=coulomb joints=a,b fc=2,3"));
+  EXPECT_EQ(c.force(0, 0, 0.5, -0.1), Eigen::Vector2d(-2, 3));
+  c.expect_regressor_consistent(0.1, 0.2, 0.5, -0.1);
+  EXPECT_EQ(c.fx->param_names(), (std::vector<std::string>{"dry.a.fc", "dry.b.fc"}));
+
+  Loaded v(decl("visc", "type=viscous joints=a fv=4"));
+  EXPECT_EQ(v.force(0, 0, 0.5, 9), Eigen::Vector2d(-2, 0));
+  v.expect_regressor_consistent(0, 0, 0.5, 9);
+
+  Loaded o(decl("bias", "type=offset joints=b c=-1.5"));
+  EXPECT_EQ(o.force(3, 3, 3, 3), Eigen::Vector2d(0, -1.5));
+
+  Loaded s(decl("str", "type=stribeck joints=a fc=1 fs=3 vs=0.1"));
+  double v0 = 0.05, expect = -(1 + 2 * std::exp(-0.25));
+  EXPECT_NEAR(s.force(0, 0, v0, 0)[0], expect, 1e-14);
+  EXPECT_NEAR(s.force(0, 0, -10, 0)[0], 1.0, 1e-12);   // far from zero: Coulomb level
+  s.expect_regressor_consistent(0, 0, v0, 0);
+
+  Loaded r(decl("rip", "type=ripple joints=a gear=30 harmonics=2,8 amplitudes=6,2 phases=0.3,0"));
+  double q = 0.123;
+  EXPECT_NEAR(r.force(q, 0, 0, 0)[0], 6 * std::sin(60 * q + 0.3) + 2 * std::sin(240 * q), 1e-12);
+  r.expect_regressor_consistent(q, 0, 0, 0);
+}
+
+TEST(ForcePlugins, FrictionBandActsOnlyInsideItsInterval) {
+  Loaded b(decl("band", "type=friction_band joints=a lower=0.15 upper=0.25 level=100"));
+  for (double q = -0.5; q <= 0.5; q += 0.001) {
+    double f = b.force(q, 0, 0.3, 0)[0];
+    if (q >= 0.15 && q <= 0.25)
+      EXPECT_DOUBLE_EQ(f, -100.0) << q;
+    else
+      EXPECT_DOUBLE_EQ(f, 0.0) << q;
+  }
+  EXPECT_DOUBLE_EQ(b.force(0.2, 0, -0.3, 0)[0], 100.0);   // opposes motion
+  b.expect_regressor_consistent(0.2, 0, -0.3, 0);
+}
+
+// The ripple's force sampled over joint position has its spectral peaks at h*gear = 60 and
+// 240 rad^-1 and nowhere else.
+TEST(ForcePlugins, RippleSpectrumPeaksAtItsHarmonics) {
+  Loaded r(decl("rip", "type=ripple joints=a gear=30 harmonics=2,8 amplitudes=6,2"));
+  const int N = 4096;
+  std::vector<double> f(N);
+  for (int k = 0; k < N; ++k) f[k] = r.force(2 * M_PI * k / N, 0, 0, 0)[0];
+  std::vector<double> power(400);
+  for (int w = 1; w < 400; ++w) {
+    std::complex<double> acc = 0;
+    for (int k = 0; k < N; ++k) acc += f[k] * std::polar(1.0, -w * 2 * M_PI * k / N);
+    power[w] = std::abs(acc) / N * 2;   // amplitude of the sinusoid at frequency w
+  }
+  EXPECT_NEAR(power[60], 6.0, 1e-9);
+  EXPECT_NEAR(power[240], 2.0, 1e-9);
+  for (int w = 1; w < 400; ++w)
+    if (w != 60 && w != 240) EXPECT_LT(power[w], 1e-9) << w;
+}
+
+// LuGre: a constant torque below the break-away force fs leaves the joint stuck (only the
+// bristles deflect, by about tau/sigma0); above fs it slides away.
+TEST(ForcePlugins, StickSlipHoldsBelowBreakAway) {
+  auto displacement = [](double torque) {
+    Loaded s(decl("ss", "type=stick_slip joints=a fc=3 fs=4.5 vs=0.05 sigma0=20000 sigma1=10 sigma2=0.1"));
+    s.fx->attach();
+    double q_at_1s = 0;
+    for (int k = 0; k < 2000; ++k) {   // 2 s
+      s.d->qfrc_applied[0] = torque;
+      step(s.m.get(), s.d.get(), *s.fx);
+      if (k == 999) q_at_1s = s.d->qpos[0];
+    }
+    return std::make_tuple(s.d->qpos[0], s.d->qpos[0] - q_at_1s, s.d->qvel[0]);
+  };
+  auto [q_stick, moved_stick, v_stick] = displacement(0.8 * 4.5);
+  EXPECT_LT(std::fabs(q_stick), 5e-3);        // bristle deflection and the initial transient only
+  EXPECT_LT(std::fabs(moved_stick), 1e-4);    // ... and then it holds still
+  EXPECT_LT(std::fabs(v_stick), 1e-3);
+  auto [q_slip, moved_slip, v_slip] = displacement(1.2 * 4.5);
+  EXPECT_GT(q_slip, 0.5);                     // net >= 0.9 Nm on unit inertia over 2 s
+  EXPECT_GT(moved_slip, 0.3);
+  EXPECT_GT(v_slip, 0.5);
+}
+
+// mjcb_passive is process-wide; each model must get its own plugins' forces.
+TEST(ForcePlugins, DispatchIsPerModel) {
+  Loaded one(decl("c", "type=offset joints=a c=1"), "one");
+  Loaded two(decl("c", "type=offset joints=a c=5"), "two");
+  Loaded none("", "none");
+  one.fx->attach();
+  two.fx->attach();
+  mj_forward(one.m.get(), one.d.get());
+  mj_forward(two.m.get(), two.d.get());
+  mj_forward(none.m.get(), none.d.get());
+  EXPECT_DOUBLE_EQ(one.d->qfrc_passive[0], 1.0);
+  EXPECT_DOUBLE_EQ(two.d->qfrc_passive[0], 5.0);
+  EXPECT_DOUBLE_EQ(none.d->qfrc_passive[0], 0.0);
+  two.fx->detach();
+  mj_forward(two.m.get(), two.d.get());
+  EXPECT_DOUBLE_EQ(two.d->qfrc_passive[0], 0.0);
+  mj_forward(one.m.get(), one.d.get());
+  EXPECT_DOUBLE_EQ(one.d->qfrc_passive[0], 1.0);
+}
+
+TEST(ForcePlugins, BadDeclarationsNameTheElement) {
+  const std::string el = "<custom><text name=\"spml.plugin.x\">";
+  struct Case { std::string data, message; };
+  std::vector<Case> cases = {
+      {"type=no_such_plugin joints=a", "unknown plugin 'no_such_plugin' (available: coulomb, friction_band, offset, ripple, stick_slip, stribeck, viscous"},
+      {"type=coulomb joints=a fc=1 lvl=2", "unknown key 'lvl' for plugin 'coulomb' (accepted: type, joints, fc, smooth)"},
+      {"type=coulomb joints=a fc=abc", "plugin 'coulomb': key 'fc': 'abc' is not a finite number"},
+      {"type=coulomb joints=a", "plugin 'coulomb': missing required key 'fc'"},
+      {"type=coulomb joints=a,b fc=1,2,3", "key 'fc': expected 1 or 2 values, got 3"},
+      {"type=coulomb joints=elbow fc=1", "joint 'elbow' does not exist in the model"},
+      {"joints=a fc=1", "missing 'type=<plugin>'"},
+      {"type=coulomb fc=1", "missing 'joints=<joint>[,<joint>...]'"},
+      {"type=coulomb joints=a fc", "'fc' is not of the form key=value"},
+      {"type=friction_band joints=a lower=0.3 upper=0.2 level=1", "lower (0.300000) must be below upper (0.200000)"},
+  };
+  for (const auto& c : cases) {
+    std::string err = error_of(decl("x", c.data));
+    EXPECT_NE(err.find(el), std::string::npos) << c.data << " -> " << err;
+    EXPECT_NE(err.find(c.message), std::string::npos) << c.data << " -> " << err;
+  }
+}
+
+TEST(ForcePlugins, AbiMismatchIsRejected) {
+  setenv("SPML_PLUGIN_PATH", SPML_TEST_PLUGIN_DIR, 1);
+  std::string err = error_of(decl("w", "type=wrong_abi joints=a"));
+  unsetenv("SPML_PLUGIN_PATH");
+  EXPECT_NE(err.find("spml_force_wrong_abi.so: force-plugin ABI version 99, this spml speaks version 1"), std::string::npos) << err;
+}
