@@ -1,0 +1,82 @@
+// The identification model of any MJCF tree of hinge/slide joints, derived numerically from
+// MuJoCo's kinematics: tau = Y(q, qd, qdd) * pi with
+//   per body  b: m, m*cx, m*cy, m*cz, Ixx, Iyy, Izz, Ixy, Ixz, Iyz   (inertia about the body
+//                frame origin, in body coordinates)
+//   per joint j: armature (qdd), damping (qd), Coulomb (sign qd), [offset (1) on request]
+//   per tendon with stiffness/damping, per joint with stiffness: spring and damper terms
+//   plus the regressor columns of every linear force plugin declared in the MJCF.
+// Base parameters come from a column-pivoted QR over many random states.
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "spml/dataset.h"
+#include "spml/envs/mujoco_model.h"
+#include "spml/force_effects.h"
+
+namespace spml {
+
+struct RegressorOptions {
+  bool offsets = false;   // add a constant-torque column per joint
+};
+
+class MjcfRegressor {
+ public:
+  MjcfRegressor(const std::string& mjcf_file, const RegressorOptions& options = {});
+  ~MjcfRegressor();
+
+  const mjModel* model() const { return m_.get(); }
+  int nv() const { return m_->nv; }
+  const std::vector<std::string>& joint_names() const { return joints_; }
+
+  // Standard parameters: names and the values of the loaded model (pi such that
+  // Y * pi = mj_inverse of that model, plugins included).
+  const std::vector<std::string>& param_names() const { return names_; }
+  const Eigen::VectorXd& model_params() const { return pi_; }
+
+  // Y for one state: nv x num_params.
+  Eigen::MatrixXd evaluate(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd) const;
+
+  struct Base {
+    int rank = 0;
+    double tolerance = 0;                 // QR threshold used
+    std::vector<int> independent;         // indices into the standard parameters
+    std::vector<int> dependent;
+    Eigen::MatrixXd Kd;                   // beta = pi[independent] + Kd * pi[dependent]
+    std::vector<std::string> names;       // readable grouping per base parameter
+    Eigen::VectorXd model_values;         // beta of the loaded model (its prior)
+    Eigen::MatrixXd Y_base(const Eigen::MatrixXd& Y) const;   // columns of Y kept as base
+  };
+  // Random states in joint ranges (or +-pi / +-1 m), velocities and accelerations; `samples`
+  // states stacked. Deterministic for a given seed.
+  Base base_parameters(int samples = 400, std::uint64_t seed = 1) const;
+
+ private:
+  ModelPtr m_;
+  DataPtr d_;
+  std::unique_ptr<ForceEffects> effects_;
+  RegressorOptions options_;
+  std::vector<std::string> joints_, names_;
+  Eigen::VectorXd pi_;
+  std::vector<int> tendons_, stiff_joints_;
+};
+
+// Least-squares identification of base parameters on one split of a dataset whose X has
+// q:/qd:/qdd:<joint> and whose Y has tau:<joint> for every joint of the model.
+struct Identification {
+  std::vector<std::string> names;
+  Eigen::VectorXd estimate, std_error, prior;
+  double sigma = 0;             // residual standard deviation
+  double condition = 0;         // of the stacked base regressor
+  struct SplitError { std::string split; Eigen::Index rows; double relative_error, rmse; };
+  std::vector<SplitError> errors;   // first the identification split, then the others held out
+};
+
+Identification identify(const MjcfRegressor& reg, const MjcfRegressor::Base& base, const Dataset& ds,
+                        const std::string& split);
+
+}  // namespace spml

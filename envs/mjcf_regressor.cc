@@ -1,0 +1,283 @@
+#include "spml/envs/mjcf_regressor.h"
+
+#include <Eigen/Dense>
+#include <cmath>
+#include <random>
+#include <sstream>
+
+namespace spml {
+namespace {
+
+std::string fmt(double v) {
+  std::ostringstream s;
+  s.precision(4);
+  s << v;
+  return s.str();
+}
+
+// Newton-Euler wrench of one body, in its frame, as a 6 x 10 matrix acting on
+// (m, hx, hy, hz, Ixx, Iyy, Izz, Ixy, Ixz, Iyz): rows 0-2 force, rows 3-5 moment about the
+// origin. w = angular velocity, dw = angular acceleration, a = classical acceleration of the
+// origin with gravity folded in (a - g).
+Eigen::Matrix<double, 6, 10> body_wrench(const Eigen::Vector3d& w, const Eigen::Vector3d& dw, const Eigen::Vector3d& a) {
+  auto skew = [](const Eigen::Vector3d& v) {
+    Eigen::Matrix3d S;
+    S << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
+    return S;
+  };
+  // I * x for symmetric I written as a linear map of the 6 inertia entries.
+  auto inertia_map = [](const Eigen::Vector3d& x) {
+    Eigen::Matrix<double, 3, 6> L;
+    L << x.x(), 0, 0, x.y(), x.z(), 0,
+         0, x.y(), 0, x.x(), 0, x.z(),
+         0, 0, x.z(), 0, x.x(), x.y();
+    return L;
+  };
+  Eigen::Matrix<double, 6, 10> A = Eigen::Matrix<double, 6, 10>::Zero();
+  Eigen::Matrix3d W = skew(w);
+  A.block<3, 1>(0, 0) = a;                                   // m a
+  A.block<3, 3>(0, 1) = skew(dw) + W * W;                    // dw x h + w x (w x h)
+  A.block<3, 3>(3, 1) = -skew(a);                            // h x a = -a x h
+  A.block<3, 6>(3, 4) = inertia_map(dw) + W * inertia_map(w);   // I dw + w x (I w)
+  return A;
+}
+
+}  // namespace
+
+MjcfRegressor::MjcfRegressor(const std::string& mjcf_file, const RegressorOptions& options)
+    : m_(load_mjcf(mjcf_file)), d_(make_data(m_.get())), options_(options) {
+  const mjModel* m = m_.get();
+  for (int j = 0; j < m->njnt; ++j)
+    if (m->jnt_type[j] != mjJNT_HINGE && m->jnt_type[j] != mjJNT_SLIDE)
+      throw std::runtime_error(mjcf_file + ": joint '" + mj_id2name(m, mjOBJ_JOINT, j) +
+                               "' is a free or ball joint; the regressor supports hinge and slide joints");
+  effects_ = std::make_unique<ForceEffects>(m, mjcf_file);
+  for (int j = 0; j < m->njnt; ++j) joints_.push_back(mj_id2name(m, mjOBJ_JOINT, j));
+  std::vector<double> values;
+  static const char* kBody[10] = {"m", "mx", "my", "mz", "Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz"};
+  for (int b = 1; b < m->nbody; ++b) {
+    const char* bn = mj_id2name(m, mjOBJ_BODY, b);
+    std::string body = bn ? bn : "body" + std::to_string(b);
+    // Inertia about the body origin in body coordinates from MuJoCo's (mass, ipos, iquat, diag).
+    double mass = m->body_mass[b];
+    Eigen::Vector3d c(m->body_ipos + 3 * b);
+    double mat[9];
+    mju_quat2Mat(mat, m->body_iquat + 4 * b);
+    Eigen::Matrix3d R = Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(mat);
+    Eigen::Matrix3d I = R * Eigen::Vector3d(m->body_inertia + 3 * b).asDiagonal() * R.transpose() +
+                        mass * (c.squaredNorm() * Eigen::Matrix3d::Identity() - c * c.transpose());
+    double v[10] = {mass, mass * c.x(), mass * c.y(), mass * c.z(), I(0, 0), I(1, 1), I(2, 2), I(0, 1), I(0, 2), I(1, 2)};
+    for (int k = 0; k < 10; ++k) {
+      names_.push_back(std::string(kBody[k]) + ":" + body);
+      values.push_back(v[k]);
+    }
+  }
+  for (int j = 0; j < m->njnt; ++j) {
+    int dof = m->jnt_dofadr[j];
+    names_.push_back("armature:" + joints_[j]); values.push_back(m->dof_armature[dof]);
+    names_.push_back("damping:" + joints_[j]);  values.push_back(m->dof_damping[dof]);
+    names_.push_back("coulomb:" + joints_[j]);  values.push_back(m->dof_frictionloss[dof]);
+    if (options_.offsets) { names_.push_back("offset:" + joints_[j]); values.push_back(0.0); }
+  }
+  for (int j = 0; j < m->njnt; ++j)
+    if (m->jnt_stiffness[j] != 0) {
+      stiff_joints_.push_back(j);
+      names_.push_back("stiffness:" + joints_[j]);
+      values.push_back(m->jnt_stiffness[j]);
+    }
+  for (int t = 0; t < m->ntendon; ++t)
+    if (m->tendon_stiffness[t] != 0 || m->tendon_damping[t] != 0) {
+      const char* tn = mj_id2name(m, mjOBJ_TENDON, t);
+      std::string name = tn ? tn : "tendon" + std::to_string(t);
+      tendons_.push_back(t);
+      names_.push_back("stiffness:" + name); values.push_back(m->tendon_stiffness[t]);
+      names_.push_back("damping:" + name);   values.push_back(m->tendon_damping[t]);
+    }
+  // Plugins whose force is linear in their parameters: tau_inverse = ... - R * theta.
+  for (const auto& n : effects_->linear_names()) names_.push_back("plugin:" + n);
+  Eigen::VectorXd theta = effects_->params();
+  int k = 0;
+  for (const auto& inst : effects_->instances())
+    if (inst.plugin->regressor)
+      for (int i = 0; i < inst.nparam; ++i, ++k) values.push_back(theta[inst.param_offset + i]);
+  pi_ = Eigen::Map<Eigen::VectorXd>(values.data(), static_cast<Eigen::Index>(values.size()));
+}
+
+MjcfRegressor::~MjcfRegressor() = default;
+
+Eigen::MatrixXd MjcfRegressor::evaluate(const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                                        const Eigen::VectorXd& qdd) const {
+  const mjModel* m = m_.get();
+  mjData* d = d_.get();
+  const int nv = m->nv;
+  for (int j = 0; j < m->njnt; ++j) {
+    d->qpos[m->jnt_qposadr[j]] = q[j];
+    d->qvel[m->jnt_dofadr[j]] = qd[j];
+    d->qacc[m->jnt_dofadr[j]] = qdd[j];
+  }
+  mj_kinematics(m, d);
+  mj_comPos(m, d);
+  mj_tendon(m, d);
+  mj_transmission(m, d);
+  mj_comVel(m, d);   // cvel and cdof_dot
+  Eigen::MatrixXd Y = Eigen::MatrixXd::Zero(nv, static_cast<Eigen::Index>(names_.size()));
+  Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::RowMajor> jp(3, nv), jr(3, nv);
+  for (int b = 1; b < m->nbody; ++b) {
+    // Spatial acceleration, com-based (at the root's subtree centre of mass, world axes):
+    // sum over the dofs supporting b of cdof*qacc + cdof_dot*qvel. (mj_objectAcceleration in
+    // 2.2.2 gave wrong linear terms here, so the sum is formed directly.)
+    Eigen::Matrix<double, 6, 1> sacc = Eigen::Matrix<double, 6, 1>::Zero();
+    int dof = -1;
+    for (int bb = b; bb > 0 && dof < 0; bb = m->body_parentid[bb])
+      if (m->body_dofnum[bb]) dof = m->body_dofadr[bb] + m->body_dofnum[bb] - 1;
+    for (; dof >= 0; dof = m->dof_parentid[dof])
+      sacc += Eigen::Map<const Eigen::Matrix<double, 6, 1>>(d->cdof + 6 * dof) * d->qacc[dof] +
+              Eigen::Map<const Eigen::Matrix<double, 6, 1>>(d->cdof_dot + 6 * dof) * d->qvel[dof];
+    Eigen::Map<const Eigen::Vector3d> com(d->subtree_com + 3 * m->body_rootid[b]), origin(d->xpos + 3 * b);
+    Eigen::Map<const Eigen::Matrix<double, 6, 1>> cvel(d->cvel + 6 * b);
+    const Eigen::Vector3d r = origin - com, w = cvel.head<3>(), dw = sacc.head<3>();
+    const Eigen::Vector3d v = cvel.tail<3>() + w.cross(r);
+    // Classical acceleration of the body origin, with gravity as a base acceleration.
+    const Eigen::Vector3d a = sacc.tail<3>() + dw.cross(r) + w.cross(v) - Eigen::Vector3d(m->opt.gravity);
+    Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> R(d->xmat + 9 * b);   // body -> world
+    auto A = body_wrench(R.transpose() * w, R.transpose() * dw, R.transpose() * a);
+    mj_jacBody(m, d, jp.data(), jr.data(), b);
+    // tau += J^T (R f, R n): world-frame Jacobians of the body origin.
+    Y.middleCols(10 * (b - 1), 10) += jp.transpose() * (R * A.topRows<3>()) + jr.transpose() * (R * A.bottomRows<3>());
+  }
+  int col = 10 * (m->nbody - 1);
+  for (int j = 0; j < m->njnt; ++j) {
+    int dof = m->jnt_dofadr[j];
+    Y(dof, col++) = qdd[j];
+    Y(dof, col++) = qd[j];
+    Y(dof, col++) = qd[j] > 0 ? 1.0 : (qd[j] < 0 ? -1.0 : 0.0);
+    if (options_.offsets) Y(dof, col++) = 1.0;
+  }
+  for (int j : stiff_joints_) Y(m->jnt_dofadr[j], col++) = q[j] - m->qpos_spring[m->jnt_qposadr[j]];
+  for (int t : tendons_) {
+    Eigen::Map<const Eigen::VectorXd> J(d->ten_J + t * nv, nv);   // dense in 2.2.2
+    double len = d->ten_length[t], rate = J.dot(Eigen::Map<const Eigen::VectorXd>(d->qvel, nv));
+    Y.col(col++) = J * (len - m->tendon_lengthspring[t]);
+    Y.col(col++) = J * rate;
+  }
+  if (col < Y.cols()) Y.rightCols(Y.cols() - col) = -effects_->linear_regressor(d->qpos, d->qvel);
+  return Y;
+}
+
+Eigen::MatrixXd MjcfRegressor::Base::Y_base(const Eigen::MatrixXd& Y) const {
+  Eigen::MatrixXd out(Y.rows(), rank);
+  for (int i = 0; i < rank; ++i) out.col(i) = Y.col(independent[i]);
+  return out;
+}
+
+MjcfRegressor::Base MjcfRegressor::base_parameters(int samples, std::uint64_t seed) const {
+  const mjModel* m = m_.get();
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const int nv = m->nv, np = static_cast<int>(names_.size());
+  Eigen::MatrixXd W(static_cast<Eigen::Index>(samples) * nv, np);
+  Eigen::VectorXd q(m->njnt), qd(m->njnt), qdd(m->njnt);
+  for (int s = 0; s < samples; ++s) {
+    for (int j = 0; j < m->njnt; ++j) {
+      double lo = -M_PI, hi = M_PI;
+      if (m->jnt_limited[j]) lo = m->jnt_range[2 * j], hi = m->jnt_range[2 * j + 1];
+      else if (m->jnt_type[j] == mjJNT_SLIDE) lo = -1, hi = 1;
+      q[j] = lo + (hi - lo) * 0.5 * (u(rng) + 1);
+      qd[j] = 3 * u(rng);
+      qdd[j] = 10 * u(rng);
+    }
+    W.middleRows(static_cast<Eigen::Index>(s) * nv, nv) = evaluate(q, qd, qdd);
+  }
+  // Scale columns to unit norm so the rank decision does not depend on units.
+  Eigen::VectorXd scale = W.colwise().norm().transpose();
+  for (int c = 0; c < np; ++c) if (scale[c] > 0) W.col(c) /= scale[c];
+  Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(W);
+  Base base;
+  // Threshold: relative to the largest pivot, well above double rounding over this many rows.
+  base.tolerance = 1e-8;
+  qr.setThreshold(base.tolerance);
+  base.rank = static_cast<int>(qr.rank());
+  const auto& perm = qr.colsPermutation().indices();
+  for (int i = 0; i < np; ++i) (i < base.rank ? base.independent : base.dependent).push_back(perm[i]);
+  Eigen::MatrixXd R = qr.matrixR().topRows(base.rank).template triangularView<Eigen::Upper>();
+  Eigen::MatrixXd R11 = R.leftCols(base.rank), R12 = R.rightCols(np - base.rank);
+  Eigen::MatrixXd K = R11.triangularView<Eigen::Upper>().solve(R12);   // scaled units
+  base.Kd.resize(base.rank, np - base.rank);
+  for (int i = 0; i < base.rank; ++i)
+    for (int k = 0; k < np - base.rank; ++k) {
+      double v = K(i, k) * scale[base.dependent[k]] / scale[base.independent[i]];
+      base.Kd(i, k) = std::fabs(v) < 1e-9 ? 0.0 : v;
+    }
+  base.model_values.resize(base.rank);
+  for (int i = 0; i < base.rank; ++i) {
+    std::string name = names_[base.independent[i]];
+    double value = pi_[base.independent[i]];
+    for (int k = 0; k < np - base.rank; ++k) {
+      double c = base.Kd(i, k);
+      if (c == 0) continue;
+      name += (c > 0 ? " + " : " - ") + (std::fabs(c) == 1 ? std::string() : fmt(std::fabs(c)) + "*") + names_[base.dependent[k]];
+      value += c * pi_[base.dependent[k]];
+    }
+    base.names.push_back(name);
+    base.model_values[i] = value;
+  }
+  return base;
+}
+
+Identification identify(const MjcfRegressor& reg, const MjcfRegressor::Base& base, const Dataset& ds,
+                        const std::string& split) {
+  const auto& joints = reg.joint_names();
+  const int nv = reg.nv();
+  auto stack = [&](const Split& s, Eigen::MatrixXd& A, Eigen::VectorXd& b) {
+    std::vector<int> qi, vi, ai, ti;
+    for (const auto& j : joints) {
+      for (auto [prefix, vec] : {std::pair<const char*, std::vector<int>*>{"q:", &qi}, {"qd:", &vi}, {"qdd:", &ai}}) {
+        int c = s.x_index(prefix + j);
+        if (c < 0) throw DatasetError("split '" + s.name + "': no column '" + prefix + j + "' for model joint '" + j + "'");
+        vec->push_back(c);
+      }
+      int c = s.y_index("tau:" + j);
+      if (c < 0) throw DatasetError("split '" + s.name + "': no target column 'tau:" + j + "' for model joint '" + j + "'");
+      ti.push_back(c);
+    }
+    A.resize(s.rows() * nv, base.rank);
+    b.resize(s.rows() * nv);
+    Eigen::VectorXd q(joints.size()), qd(joints.size()), qdd(joints.size());
+    for (Eigen::Index r = 0; r < s.rows(); ++r) {
+      for (size_t j = 0; j < joints.size(); ++j) { q[j] = s.X(r, qi[j]); qd[j] = s.X(r, vi[j]); qdd[j] = s.X(r, ai[j]); }
+      A.middleRows(r * nv, nv) = base.Y_base(reg.evaluate(q, qd, qdd));
+      for (size_t j = 0; j < joints.size(); ++j) b[r * nv + reg.model()->jnt_dofadr[j]] = s.Y(r, ti[j]);
+    }
+  };
+  Identification out;
+  out.names = base.names;
+  out.prior = base.model_values;
+  Eigen::MatrixXd A;
+  Eigen::VectorXd b;
+  const Split& train = ds.get(split);
+  stack(train, A, b);
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(A, Eigen::ComputeThinU | Eigen::ComputeThinV);
+  out.estimate = svd.solve(b);
+  const auto& sv = svd.singularValues();
+  out.condition = sv[0] / sv[sv.size() - 1];
+  const double dof = static_cast<double>(A.rows() - A.cols());
+  out.sigma = std::sqrt((b - A * out.estimate).squaredNorm() / dof);
+  // (A^T A)^-1 = V S^-2 V^T
+  Eigen::MatrixXd cov = svd.matrixV() * sv.cwiseInverse().cwiseAbs2().asDiagonal() * svd.matrixV().transpose();
+  out.std_error = (out.sigma * out.sigma * cov.diagonal()).cwiseSqrt();
+  auto score = [&](const Split& s, const Eigen::MatrixXd& As, const Eigen::VectorXd& bs) {
+    Eigen::VectorXd r = bs - As * out.estimate;
+    out.errors.push_back({s.name, s.rows(), r.norm() / bs.norm(), std::sqrt(r.squaredNorm() / static_cast<double>(bs.size()))});
+  };
+  score(train, A, b);
+  for (const Split& s : ds.splits) {
+    if (s.name == split) continue;
+    Eigen::MatrixXd As;
+    Eigen::VectorXd bs;
+    stack(s, As, bs);
+    score(s, As, bs);
+  }
+  return out;
+}
+
+}  // namespace spml
