@@ -215,7 +215,8 @@ MjcfRegressor::Base MjcfRegressor::base_parameters(int samples, std::uint64_t se
     for (int k = 0; k < np - base.rank; ++k) {
       double c = base.Kd(i, k);
       if (c == 0) continue;
-      name += (c > 0 ? " + " : " - ") + (std::fabs(c) == 1 ? std::string() : fmt(std::fabs(c)) + "*") + names_[base.dependent[k]];
+      bool unit = std::fabs(std::fabs(c) - 1.0) < 1e-9;
+      name += (c > 0 ? " + " : " - ") + (unit ? std::string() : fmt(std::fabs(c)) + "*") + names_[base.dependent[k]];
       value += c * pi_[base.dependent[k]];
     }
     base.names.push_back(name);

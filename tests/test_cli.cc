@@ -126,3 +126,29 @@ TEST(CliImport, EmpsMatFile) {
   EXPECT_LE(fmax, 351.5 + 1e-9);
   std::filesystem::remove_all(tmp);
 }
+
+TEST(CliRegressor, ArmHasSeventeenBaseParameters) {
+  auto r = run(spml_bin() + " regressor --json -m " SPML_SOURCE_DIR "/mjcf/planar_arm3.xml");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  auto j = nlohmann::json::parse(r.output);
+  EXPECT_EQ(j["rank"], 17);
+  EXPECT_EQ(j["standard_parameters"], 39);
+  // ZZR1 of the paper: link 0's inertia about its joint plus armature and the outer masses.
+  bool found = false;
+  for (size_t i = 0; i < j["names"].size(); ++i)
+    if (j["names"][i] == "Iyy:link0 + m:link2 + m:link1 + armature:joint0") {
+      found = true;
+      EXPECT_NEAR(j["prior"][i].get<double>(), 9.43, 1e-9);
+    }
+  EXPECT_TRUE(found) << r.output;
+}
+
+TEST(CliIdentify, NamesMissingJointColumn) {
+  auto dir = spml::test::temp_dir("identify");
+  auto file = (dir / "toy.h5").string();
+  ASSERT_EQ(run(spml_bin() + " generate -s toy -q -o " + file).exit_code, 0);
+  auto r = run(spml_bin() + " identify -m " SPML_SOURCE_DIR "/mjcf/planar_arm3.xml -d " + file);
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("no column 'q:joint0' for model joint 'joint0'"), std::string::npos) << r.output;
+  std::filesystem::remove_all(dir);
+}

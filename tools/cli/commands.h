@@ -9,5 +9,7 @@ namespace spml::cli {
 void add_info(CLI::App& app);
 void add_import(CLI::App& app);
 void add_generate(CLI::App& app);
+void add_regressor(CLI::App& app);
+void add_identify(CLI::App& app);
 
 }  // namespace spml::cli

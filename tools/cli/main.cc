@@ -11,6 +11,8 @@ int main(int argc, char** argv) {
   spml::cli::add_info(app);
   spml::cli::add_import(app);
   spml::cli::add_generate(app);
+  spml::cli::add_regressor(app);
+  spml::cli::add_identify(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
