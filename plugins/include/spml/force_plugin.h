@@ -28,7 +28,7 @@ extern "C" {
 typedef struct spmlForcePlugin_ {
   int abi_version;                 /* SPML_FORCE_PLUGIN_ABI */
   const char* name;                /* e.g. "friction_band": the word used to name causes */
-  const char* description;         /* one line, shown by `spml plugins` */
+  const char* description;         /* one line, for listings and messages */
   const char* const* keys;         /* NULL-terminated configuration keys it accepts */
 
   /* Creates an instance acting on the given joints (ids into m). keys/values are the
