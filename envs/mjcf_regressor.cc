@@ -95,11 +95,8 @@ MjcfRegressor::MjcfRegressor(const std::string& mjcf_file, const RegressorOption
     }
   // Plugins whose force is linear in their parameters: tau_inverse = ... - R * theta.
   for (const auto& n : effects_->linear_names()) names_.push_back("plugin:" + n);
-  Eigen::VectorXd theta = effects_->params();
-  int k = 0;
-  for (const auto& inst : effects_->instances())
-    if (inst.plugin->regressor)
-      for (int i = 0; i < inst.nparam; ++i, ++k) values.push_back(theta[inst.param_offset + i]);
+  const Eigen::VectorXd theta = effects_->linear_params();
+  values.insert(values.end(), theta.data(), theta.data() + theta.size());
   pi_ = Eigen::Map<Eigen::VectorXd>(values.data(), static_cast<Eigen::Index>(values.size()));
 }
 

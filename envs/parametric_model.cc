@@ -76,6 +76,12 @@ Eigen::MatrixXd ParametricModel::stacked(const RowMatrix& X) const {
   return A;
 }
 
+Eigen::VectorXd ParametricModel::stacked_targets(const RowMatrix& Y) {
+  Eigen::VectorXd b(Y.size());
+  for (Eigen::Index o = 0; o < Y.cols(); ++o) b.segment(o * Y.rows(), Y.rows()) = Y.col(o);
+  return b;
+}
+
 RowMatrix ParametricModel::predict(const RowMatrix& X, const Eigen::VectorXd& theta) const {
   RowMatrix Y(X.rows(), num_outputs());
   for (Eigen::Index i = 0; i < X.rows(); ++i) Y.row(i) = (features(X.row(i)) * theta).transpose();

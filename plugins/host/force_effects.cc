@@ -226,6 +226,15 @@ std::vector<std::string> ForceEffects::linear_names() const {
   return names;
 }
 
+Eigen::VectorXd ForceEffects::linear_params() const {
+  const Eigen::VectorXd all = params();
+  std::vector<double> out;
+  for (const auto& inst : instances_)
+    if (inst.plugin->regressor)
+      for (int i = 0; i < inst.nparam; ++i) out.push_back(all[inst.param_offset + i]);
+  return Eigen::Map<Eigen::VectorXd>(out.data(), static_cast<Eigen::Index>(out.size()));
+}
+
 std::vector<std::string> ForceEffects::nonlinear_instances() const {
   std::vector<std::string> out;
   for (const auto& inst : instances_)

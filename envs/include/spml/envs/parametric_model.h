@@ -21,6 +21,8 @@ class ParametricModel {
 
   // Stacked regressor for a whole split, output-major: rows [o * N + i] = Phi_o(x_i).
   Eigen::MatrixXd stacked(const RowMatrix& X) const;
+  // Targets in the same output-major order: entry [o * N + i] = Y(i, o).
+  static Eigen::VectorXd stacked_targets(const RowMatrix& Y);
   // Predictions h_theta(X): N x D_out.
   RowMatrix predict(const RowMatrix& X, const Eigen::VectorXd& theta) const;
 };

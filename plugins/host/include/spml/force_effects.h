@@ -89,6 +89,7 @@ class ForceEffects {
   // skipped (listed by nonlinear_instances()).
   Eigen::MatrixXd linear_regressor(const mjtNum* qpos, const mjtNum* qvel) const;
   std::vector<std::string> linear_names() const;
+  Eigen::VectorXd linear_params() const;   // values of the linear_names() parameters
   std::vector<std::string> nonlinear_instances() const;
 
   const mjModel* model() const { return m_; }
