@@ -11,5 +11,8 @@ void add_import(CLI::App& app);
 void add_generate(CLI::App& app);
 void add_regressor(CLI::App& app);
 void add_identify(CLI::App& app);
+void add_bench(CLI::App& app);
+void add_compare(CLI::App& app);
+void add_learners(CLI::App& app);
 
 }  // namespace spml::cli

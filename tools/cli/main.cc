@@ -13,6 +13,9 @@ int main(int argc, char** argv) {
   spml::cli::add_generate(app);
   spml::cli::add_regressor(app);
   spml::cli::add_identify(app);
+  spml::cli::add_bench(app);
+  spml::cli::add_compare(app);
+  spml::cli::add_learners(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -1,10 +1,12 @@
 #include "spml/dataset.h"
+#include "spml/matrix_file.h"
 
 #include <H5Cpp.h>
 #include <unistd.h>
 
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <sstream>
 
 namespace spml {
@@ -295,18 +297,66 @@ Dataset read_dataset(const std::string& path, const ReadOptions& options) {
   return out;
 }
 
-void write_dataset(const std::string& path, const Dataset& ds) {
+namespace {
+
+// Creates `path` atomically: `body` fills a temporary HDF5 file that is renamed into place.
+template <class Body>
+void write_h5_atomic(const std::string& path, Body body) {
   H5::Exception::dontPrint();
-  validate(ds, path, ReadOptions{});
   fs::path target(path);
   if (target.has_parent_path() && !fs::exists(target.parent_path()))
     throw DatasetError(path + ": directory " + target.parent_path().string() + " does not exist");
   const std::string tmp = path + ".tmp-" + std::to_string(::getpid());
   try {
-    // Track creation order so splits read back in the order they were written.
+    // Track creation order so groups read back in the order they were written.
     H5::FileCreatPropList fcpl;
     H5Pset_link_creation_order(fcpl.getId(), H5P_CRT_ORDER_TRACKED | H5P_CRT_ORDER_INDEXED);
     H5::H5File file(tmp, H5F_ACC_TRUNC, fcpl);
+    body(file);
+    file.close();
+    fs::rename(tmp, path);
+  } catch (const H5::Exception& e) {
+    std::error_code ec;
+    fs::remove(tmp, ec);
+    throw DatasetError(path + ": write failed: " + e.getDetailMsg());
+  } catch (...) {
+    std::error_code ec;
+    fs::remove(tmp, ec);
+    throw;
+  }
+}
+
+// Opens (creating as needed) the group holding "a/b/name" and returns it.
+H5::Group parent_group(H5::H5File& file, const std::string& path, std::string* leaf) {
+  H5::Group g = file.openGroup("/");
+  size_t start = 0, slash;
+  while ((slash = path.find('/', start)) != std::string::npos) {
+    const std::string part = path.substr(start, slash - start);
+    g = g.nameExists(part) ? g.openGroup(part) : g.createGroup(part);
+    start = slash + 1;
+  }
+  *leaf = path.substr(start);
+  return g;
+}
+
+void collect_matrices(const H5::Group& g, const std::string& prefix, const std::string& where, MatrixFile& out) {
+  for (hsize_t i = 0; i < g.getNumObjs(); ++i) {
+    const std::string name = g.getObjnameByIdx(i);
+    const std::string full = prefix.empty() ? name : prefix + "/" + name;
+    if (g.getObjTypeByIdx(i) == H5G_GROUP) {
+      collect_matrices(g.openGroup(name), full, where, out);
+    } else {
+      std::vector<std::string> columns;
+      out.matrices[full] = read_matrix(g, name, where, columns);
+    }
+  }
+}
+
+}  // namespace
+
+void write_dataset(const std::string& path, const Dataset& ds) {
+  validate(ds, path, ReadOptions{});
+  write_h5_atomic(path, [&](H5::H5File& file) {
     H5::Group root = file.openGroup("/");
     write_string_attr(root, "format", kFormatName);
     for (const auto& [key, value] : ds.provenance)
@@ -327,17 +377,53 @@ void write_dataset(const std::string& path, const Dataset& ds) {
       if (m.prior.size()) write_vector(g, "prior", m.prior);
       if (m.truth.size()) write_vector(g, "truth", m.truth);
     }
-    file.close();
-    fs::rename(tmp, path);
+  });
+}
+
+void write_matrix_file(const std::string& path, const MatrixFile& mf) {
+  write_h5_atomic(path, [&](H5::H5File& file) {
+    H5::Group root = file.openGroup("/");
+    for (const auto& [key, value] : mf.attributes) write_string_attr(root, key, value);
+    for (const auto& [name, m] : mf.matrices) {
+      std::string leaf;
+      H5::Group g = parent_group(file, name, &leaf);
+      std::vector<std::string> columns;
+      for (Eigen::Index j = 0; j < m.cols(); ++j) columns.push_back(std::to_string(j));
+      write_matrix(g, leaf, m, columns);
+    }
+  });
+}
+
+MatrixFile read_matrix_file(const std::string& path) {
+  H5::Exception::dontPrint();
+  MatrixFile out;
+  try {
+    H5::H5File file(path, H5F_ACC_RDONLY);
+    H5::Group root = file.openGroup("/");
+    for (int i = 0; i < root.getNumAttrs(); ++i) {
+      H5::Attribute a = root.openAttribute(static_cast<unsigned>(i));
+      out.attributes[a.getName()] = read_string_attr(a, path);
+    }
+    collect_matrices(root, "", path, out);
   } catch (const H5::Exception& e) {
-    std::error_code ec;
-    fs::remove(tmp, ec);
-    throw DatasetError(path + ": write failed: " + e.getDetailMsg());
-  } catch (...) {
-    std::error_code ec;
-    fs::remove(tmp, ec);
-    throw;
+    throw DatasetError(path + ": cannot read: " + e.getDetailMsg());
   }
+  return out;
+}
+
+void write_text_atomic(const std::string& path, const std::string& content) {
+  const std::string tmp = path + ".tmp-" + std::to_string(::getpid());
+  {
+    std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
+    f << content;
+    f.close();
+    if (!f) {
+      std::error_code ec;
+      fs::remove(tmp, ec);
+      throw DatasetError(path + ": write failed");
+    }
+  }
+  fs::rename(tmp, path);
 }
 
 }  // namespace spml

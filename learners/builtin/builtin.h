@@ -1,0 +1,90 @@
+// The C++ side of the built-in learner library: each learner is a class with fit/predict
+// on Eigen views; make_learner<T>() wraps it in the C ABI of spml/learner.h, turning
+// exceptions into error messages so nothing unwinds across the boundary.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdio>
+#include <exception>
+#include <map>
+#include <memory>
+#include <string>
+
+#include "spml/learner.h"
+
+namespace spml::builtin {
+
+using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+using ConstRowMap = Eigen::Map<const RowMatrix>;
+
+// The ABI's data as Eigen views (phi has 0 columns when the host gave none).
+struct View {
+  ConstRowMap X, Y, phi;
+  Eigen::Index outputs;
+  explicit View(const spml_learner_data& d)
+      : X(d.x, d.rows, d.inputs),
+        Y(d.y, d.y ? d.rows : 0, d.outputs),
+        phi(d.phi, d.phi ? d.rows * d.outputs : 0, d.phi ? d.params : 0),
+        outputs(d.outputs) {}
+};
+
+struct Config {
+  std::map<std::string, std::string> values;
+  std::uint64_t seed = 0;
+  explicit Config(const spml_learner_config* c);
+  double number(const std::string& key, double fallback) const;   // throws naming the key
+};
+
+class Learner {
+ public:
+  virtual ~Learner() = default;
+  virtual void fit(const View& train, const spml_learner_model& model, const Config& config) = 0;
+  // mean, var: rows x outputs row-major buffers; var may be null.
+  virtual void predict(const View& query, double* mean, double* var) const = 0;
+  virtual Eigen::VectorXd coefficients() const { return {}; }
+  std::string notes;
+};
+
+// Throws unless the host passed a regressor with the model's parameter count.
+void require_model(const View& data, const spml_learner_model& model, const char* learner);
+
+template <class T>
+struct Adapter {
+  static void* fit(const spml_learner_data* train, const spml_learner_model* model, const spml_learner_config* config,
+                   char* error, size_t error_size) {
+    try {
+      auto learner = std::make_unique<T>();
+      learner->fit(View(*train), *model, Config(config));
+      return learner.release();
+    } catch (const std::exception& e) {
+      std::snprintf(error, error_size, "%s", e.what());
+      return nullptr;
+    }
+  }
+  static int predict(void* state, const spml_learner_data* query, double* mean, double* var, char* error,
+                     size_t error_size) {
+    try {
+      static_cast<const T*>(state)->predict(View(*query), mean, var);
+      return 0;
+    } catch (const std::exception& e) {
+      std::snprintf(error, error_size, "%s", e.what());
+      return 1;
+    }
+  }
+  static const char* notes(void* state) { return static_cast<T*>(state)->notes.c_str(); }
+  static int32_t coefficients(void* state, double* theta, int32_t capacity) {
+    Eigen::VectorXd c = static_cast<T*>(state)->coefficients();
+    for (int32_t i = 0; i < capacity && i < c.size(); ++i) theta[i] = c[i];
+    return static_cast<int32_t>(c.size());
+  }
+  static void destroy(void* state) { delete static_cast<T*>(state); }
+};
+
+template <class T>
+spml_learner make_learner(const char* name, const char* summary, uint32_t flags, const char* keys) {
+  return spml_learner{SPML_LEARNER_ABI_VERSION, name, summary, flags, keys,
+                      &Adapter<T>::fit, &Adapter<T>::predict, &Adapter<T>::notes,
+                      &Adapter<T>::coefficients, &Adapter<T>::destroy};
+}
+
+}  // namespace spml::builtin

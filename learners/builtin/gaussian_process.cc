@@ -1,0 +1,119 @@
+// GP and semi-parametric GP learners over spml::gp. "-SepKer" fits one GP (and, for SPGP,
+// one coefficient vector) per output; otherwise all outputs share one kernel and theta.
+#include <cmath>
+#include <memory>
+#include <stdexcept>
+#include <vector>
+
+#include "learners.h"
+#include "spml/gp/gp.h"
+
+namespace spml::builtin {
+namespace {
+
+enum class MeanStart { kNone, kPrior, kZeros, kOnes };
+
+template <MeanStart kMean, bool kSeparate>
+class GaussianProcess : public Learner {
+ public:
+  void fit(const View& d, const spml_learner_model& model, const Config& config) override {
+    if (kMean != MeanStart::kNone) require_model(d, model, "SPGP");
+    gp::FitOptions options;
+    options.max_evals = static_cast<int>(config.number("max_evals", options.max_evals));
+    options.noise_floor = config.number("noise_floor", options.noise_floor);
+    options.learn_mean = kMean != MeanStart::kNone;
+    if (options.max_evals < 1) throw std::runtime_error("max_evals must be >= 1");
+    if (!(options.noise_floor > 0)) throw std::runtime_error("noise_floor must be > 0");
+
+    const Eigen::Index n = d.X.rows(), O = d.Y.cols(), M = options.learn_mean ? d.phi.cols() : 0;
+    gp::Hyper start;
+    start.lengthscales = Eigen::VectorXd::Ones(d.X.cols());   // the paper: everything starts at 1.0
+    start.signal_var = 1.0;
+    start.noise_var = 1.0;
+    start.theta = initial_theta(model, M);
+
+    const Eigen::MatrixXd X = d.X;
+    outputs_ = O;
+    const int groups = kSeparate ? static_cast<int>(O) : 1;
+    for (int g = 0; g < groups; ++g) {
+      Eigen::MatrixXd Y = kSeparate ? Eigen::MatrixXd(d.Y.col(g)) : Eigen::MatrixXd(d.Y);
+      Eigen::MatrixXd phi;
+      if (M > 0) phi = kSeparate ? Eigen::MatrixXd(d.phi.middleRows(g * n, n)) : Eigen::MatrixXd(d.phi);
+      auto lik = std::make_unique<gp::Likelihood>(X, std::move(Y), std::move(phi));
+      gp::FitResult r = gp::fit(*lik, start, options);
+      for (const auto& w : r.warnings) add_note((kSeparate ? "output " + std::to_string(g) + ": " : std::string()) + w);
+      posteriors_.emplace_back(*lik, r.hyper);
+      if (posteriors_.back().jitter() > 0) add_note("posterior Cholesky needed jitter");
+      theta_.push_back(r.hyper.theta);
+    }
+  }
+
+  void predict(const View& q, double* mean, double* var) const override {
+    const Eigen::Index m = q.X.rows();
+    const Eigen::Index M = theta_.empty() ? 0 : theta_.front().size();
+    if (M > 0 && q.phi.cols() != M) throw std::runtime_error("query regressor has the wrong number of columns");
+    const Eigen::MatrixXd Xs = q.X;
+    const Eigen::Index O = q.outputs;
+    if (O != outputs_) throw std::runtime_error("query has " + std::to_string(O) + " outputs, the fit had " + std::to_string(outputs_));
+    for (size_t g = 0; g < posteriors_.size(); ++g) {
+      Eigen::MatrixXd phi;
+      if (M > 0) phi = kSeparate ? Eigen::MatrixXd(q.phi.middleRows(static_cast<Eigen::Index>(g) * m, m)) : Eigen::MatrixXd(q.phi);
+      Eigen::MatrixXd mu, v;
+      posteriors_[g].predict(Xs, phi, &mu, var ? &v : nullptr);
+      for (Eigen::Index i = 0; i < m; ++i)
+        for (Eigen::Index k = 0; k < mu.cols(); ++k) {
+          const Eigen::Index o = kSeparate ? static_cast<Eigen::Index>(g) : k;
+          mean[i * O + o] = mu(i, k);
+          if (var) var[i * O + o] = v(i, k);
+        }
+    }
+  }
+
+  Eigen::VectorXd coefficients() const override {
+    if (kSeparate || theta_.empty()) return {};
+    return theta_.front();
+  }
+
+ private:
+  static Eigen::VectorXd initial_theta(const spml_learner_model& model, Eigen::Index M) {
+    switch (kMean) {
+      case MeanStart::kNone: return {};
+      case MeanStart::kZeros: return Eigen::VectorXd::Zero(M);
+      case MeanStart::kOnes: return Eigen::VectorXd::Ones(M);
+      case MeanStart::kPrior:
+        if (!model.prior) throw std::runtime_error("SPGP starts from the model's prior coefficients; the dataset has none "
+                                                   "(use SPGP-from-zeros or SPGP-from-ones)");
+        return Eigen::Map<const Eigen::VectorXd>(model.prior, M);
+    }
+    return {};
+  }
+  void add_note(const std::string& s) { notes += (notes.empty() ? "" : "; ") + s; }
+
+  std::vector<gp::Posterior> posteriors_;
+  std::vector<Eigen::VectorXd> theta_;
+  Eigen::Index outputs_ = 0;
+};
+
+constexpr uint32_t kGpFlags = SPML_LEARNER_VARIANCE | SPML_LEARNER_DETERMINISTIC;
+constexpr const char* kGpKeys = "max_evals,noise_floor";
+
+}  // namespace
+
+void add_gaussian_process_learners(std::vector<spml_learner>& out) {
+  out.push_back(make_learner<GaussianProcess<MeanStart::kNone, false>>(
+      "GP", "GP, ARD RBF kernel shared by all outputs, zero mean", kGpFlags | SPML_LEARNER_NONPARAMETRIC, kGpKeys));
+  out.push_back(make_learner<GaussianProcess<MeanStart::kNone, true>>(
+      "GP-SepKer", "one GP per output, ARD RBF kernel, zero mean", kGpFlags | SPML_LEARNER_NONPARAMETRIC, kGpKeys));
+  out.push_back(make_learner<GaussianProcess<MeanStart::kPrior, false>>(
+      "SPGP", "GP with mean phi(x).theta, theta learnt jointly, from the prior", kGpFlags | SPML_LEARNER_USES_MODEL,
+      kGpKeys));
+  out.push_back(make_learner<GaussianProcess<MeanStart::kPrior, true>>(
+      "SPGP-SepKer", "SPGP with kernel and theta per output, from the prior", kGpFlags | SPML_LEARNER_USES_MODEL,
+      kGpKeys));
+  out.push_back(make_learner<GaussianProcess<MeanStart::kZeros, false>>(
+      "SPGP-from-zeros", "SPGP started from theta = 0", kGpFlags | SPML_LEARNER_USES_MODEL, kGpKeys));
+  out.push_back(make_learner<GaussianProcess<MeanStart::kOnes, false>>(
+      "SPGP-from-ones", "SPGP started from theta = 1", kGpFlags | SPML_LEARNER_USES_MODEL, kGpKeys));
+}
+
+}  // namespace spml::builtin

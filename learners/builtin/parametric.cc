@@ -1,0 +1,154 @@
+// The purely parametric learners: least squares, epsilon-SVR with the model as kernel
+// basis, and the model with fixed (prior / true) coefficients.
+#include <libsvm/svm.h>
+
+#include <Eigen/Dense>
+#include <cmath>
+#include <stdexcept>
+#include <vector>
+
+#include "learners.h"
+
+namespace spml::builtin {
+namespace {
+
+// y stacked output-major, matching phi's row order.
+Eigen::VectorXd stacked_targets(const View& d) {
+  Eigen::VectorXd b(d.Y.size());
+  for (Eigen::Index o = 0; o < d.Y.cols(); ++o) b.segment(o * d.Y.rows(), d.Y.rows()) = d.Y.col(o);
+  return b;
+}
+
+// A linear-in-parameters model with coefficients theta; subclasses decide theta.
+class LinearModel : public Learner {
+ public:
+  void predict(const View& q, double* mean, double*) const override {
+    require_columns(q);
+    Eigen::VectorXd m = q.phi * theta_;
+    const Eigen::Index n = q.X.rows(), O = q.outputs;
+    for (Eigen::Index i = 0; i < n; ++i)
+      for (Eigen::Index o = 0; o < O; ++o) mean[i * O + o] = m[o * n + i] + bias_;
+  }
+  Eigen::VectorXd coefficients() const override { return theta_; }
+
+ protected:
+  void require_columns(const View& q) const {
+    if (q.phi.cols() != theta_.size())
+      throw std::runtime_error("regressor has " + std::to_string(q.phi.cols()) + " columns, the fit had " +
+                               std::to_string(theta_.size()));
+  }
+  Eigen::VectorXd theta_;
+  double bias_ = 0.0;
+};
+
+class LeastSquares : public LinearModel {
+ public:
+  void fit(const View& d, const spml_learner_model& model, const Config&) override {
+    require_model(d, model, "LLS");
+    Eigen::MatrixXd A = d.phi;
+    // Complete orthogonal decomposition: the minimum-norm solution if the data do not
+    // excite every parameter (rank-deficient regressor).
+    Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(A);
+    theta_ = cod.solve(stacked_targets(d));
+    if (cod.rank() < A.cols())
+      notes = "regressor rank " + std::to_string(cod.rank()) + " < " + std::to_string(A.cols()) +
+              " parameters: minimum-norm solution";
+  }
+};
+
+template <bool kTruth>
+class FixedCoefficients : public LinearModel {
+ public:
+  void fit(const View& d, const spml_learner_model& model, const Config&) override {
+    const char* name = kTruth ? "LLS-simulated" : "LLS-prior";
+    require_model(d, model, name);
+    const double* values = kTruth ? model.truth : model.prior;
+    if (!values)
+      throw std::runtime_error(std::string(name) + ": the dataset's model has no " +
+                               (kTruth ? "true (simulated)" : "prior") + " coefficients");
+    theta_ = Eigen::Map<const Eigen::VectorXd>(values, model.params);
+  }
+};
+
+// epsilon-SVR (libsvm) with a linear kernel on the model features, so that w is theta and
+// the fit differs from LLS only by its loss (linear, epsilon-insensitive, robust to
+// outliers). Features are scaled to unit RMS before the fit (and w back afterwards), so
+// that C acts alike on every coefficient. Defaults after Cherkassky & Ma (2004):
+//   C = max(|mean(y) + 3 std(y)|, |mean(y) - 3 std(y)|)
+//   epsilon = 3 sigma sqrt(ln(n) / n), sigma = RMS residual of the least-squares fit.
+class SupportVectorRegression : public LinearModel {
+ public:
+  void fit(const View& d, const spml_learner_model& model, const Config& config) override {
+    require_model(d, model, "SVR");
+    const Eigen::Index n = d.phi.rows(), M = d.phi.cols();
+    const Eigen::VectorXd y = stacked_targets(d);
+    Eigen::VectorXd scale(M);
+    for (Eigen::Index j = 0; j < M; ++j) {
+      const double rms = std::sqrt(d.phi.col(j).squaredNorm() / static_cast<double>(n));
+      scale[j] = rms > 0 ? 1.0 / rms : 1.0;
+    }
+    const double mean = y.mean();
+    const double sd = std::sqrt((y.array() - mean).square().mean());
+    const double C_default = std::max(std::abs(mean + 3 * sd), std::abs(mean - 3 * sd));
+    Eigen::MatrixXd A = d.phi;
+    const Eigen::VectorXd r = y - A * A.completeOrthogonalDecomposition().solve(y);
+    const double sigma = std::sqrt(r.squaredNorm() / static_cast<double>(n));
+    const double eps_default = 3.0 * sigma * std::sqrt(std::log(static_cast<double>(n)) / static_cast<double>(n));
+    const double C = config.number("C", C_default > 0 ? C_default : 1.0);
+    const double epsilon = config.number("epsilon", eps_default);
+    if (!(C > 0)) throw std::runtime_error("SVR: C must be > 0");
+    if (!(epsilon >= 0)) throw std::runtime_error("SVR: epsilon must be >= 0");
+
+    std::vector<svm_node> nodes(static_cast<size_t>(n * (M + 1)));
+    std::vector<svm_node*> rows(static_cast<size_t>(n));
+    std::vector<double> targets(y.data(), y.data() + n);
+    for (Eigen::Index i = 0; i < n; ++i) {
+      svm_node* row = &nodes[static_cast<size_t>(i * (M + 1))];
+      rows[static_cast<size_t>(i)] = row;
+      for (Eigen::Index j = 0; j < M; ++j) row[j] = svm_node{static_cast<int>(j + 1), d.phi(i, j) * scale[j]};
+      row[M] = svm_node{-1, 0.0};
+    }
+    svm_problem prob{static_cast<int>(n), targets.data(), rows.data()};
+    svm_parameter param{};
+    param.svm_type = EPSILON_SVR;
+    param.kernel_type = LINEAR;
+    param.C = C;
+    param.p = epsilon;
+    param.eps = 1e-3;
+    param.cache_size = 200;
+    param.shrinking = 1;
+    svm_set_print_string_function([](const char*) {});
+    if (const char* err = svm_check_parameter(&prob, &param)) throw std::runtime_error(std::string("SVR: ") + err);
+    svm_model* m = svm_train(&prob, &param);
+    // w = sum_i coef_i x_i over the support vectors; libsvm's decision is w.x - rho.
+    Eigen::VectorXd w = Eigen::VectorXd::Zero(M);
+    for (int k = 0; k < m->l; ++k)
+      for (const svm_node* node = m->SV[k]; node->index != -1; ++node) w[node->index - 1] += m->sv_coef[0][k] * node->value;
+    bias_ = -m->rho[0];
+    theta_ = w.cwiseProduct(scale);
+    svm_free_and_destroy_model(&m);
+  }
+};
+
+}  // namespace
+
+spml_learner lls_learner() {
+  return make_learner<LeastSquares>("LLS", "linear least squares on the stacked model regressor",
+                                    SPML_LEARNER_USES_MODEL | SPML_LEARNER_PARAMETRIC | SPML_LEARNER_DETERMINISTIC, "");
+}
+spml_learner lls_prior_learner() {
+  return make_learner<FixedCoefficients<false>>("LLS-prior", "the model with the dataset's prior coefficients, no fit",
+                                                SPML_LEARNER_USES_MODEL | SPML_LEARNER_DETERMINISTIC, "");
+}
+spml_learner lls_simulated_learner() {
+  return make_learner<FixedCoefficients<true>>("LLS-simulated",
+                                               "the model with the simulation's true coefficients, no fit",
+                                               SPML_LEARNER_USES_MODEL | SPML_LEARNER_DETERMINISTIC, "");
+}
+spml_learner svr_learner() {
+  return make_learner<SupportVectorRegression>(
+      "SVR", "libsvm epsilon-SVR, linear kernel on the model features",
+      SPML_LEARNER_USES_MODEL | SPML_LEARNER_PARAMETRIC | SPML_LEARNER_DETERMINISTIC, "C,epsilon");
+}
+
+}  // namespace spml::builtin

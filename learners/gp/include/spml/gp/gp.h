@@ -1,0 +1,91 @@
+// Exact Gaussian-process regression with an ARD RBF kernel, a Gaussian likelihood and an
+// optional linear-in-parameters mean m_o(x) = phi_o(x) . theta (the semi-parametric GP).
+//
+// Several outputs can share one kernel: their log marginal likelihoods are summed, so the
+// log-determinant is counted once per output while one Cholesky factor serves them all.
+// Dense linear algebra goes to LAPACK/BLAS (OpenBLAS in the default build): one likelihood
+// and gradient costs one Cholesky plus one inverse, about n^3 flops.
+#pragma once
+
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+namespace spml::gp {
+
+// Parameter vector of the likelihood, all kernel terms in log space:
+//   [log l_1 .. log l_d, log sf2, log sn2, theta_1 .. theta_M]
+// (theta only when the likelihood has a mean model).
+struct Hyper {
+  Eigen::VectorXd lengthscales;   // d
+  double signal_var = 1.0;        // sf2
+  double noise_var = 1.0;         // sn2
+  Eigen::VectorXd theta;          // M (empty without a mean model)
+};
+Eigen::VectorXd pack(const Hyper& h);
+Hyper unpack(const Eigen::VectorXd& p, int inputs, int params);
+
+// The log marginal likelihood of Y (n x O) given X (n x d) and, optionally, the mean
+// model's regressor phi ((O*n) x M, row o*n+i = phi_o(x_i)).
+class Likelihood {
+ public:
+  Likelihood(Eigen::MatrixXd X, Eigen::MatrixXd Y, Eigen::MatrixXd phi = {});
+  int inputs() const { return static_cast<int>(X_.cols()); }
+  int outputs() const { return static_cast<int>(Y_.cols()); }
+  int params() const { return static_cast<int>(phi_.cols()); }
+  int size() const { return inputs() + 2 + params(); }
+  // Returns the LML; fills its gradient w.r.t. the packed parameters when grad != nullptr.
+  double evaluate(const Eigen::VectorXd& p, Eigen::VectorXd* grad);
+  // Largest jitter the Cholesky ladder had to add so far (0 when never needed).
+  double max_jitter() const { return max_jitter_; }
+  const Eigen::MatrixXd& X() const { return X_; }
+  const Eigen::MatrixXd& Y() const { return Y_; }
+  const Eigen::MatrixXd& phi() const { return phi_; }
+
+ private:
+  Eigen::MatrixXd X_, Y_, phi_;
+  Eigen::MatrixXd kf_, a_;   // n x n work matrices (noise-free kernel; factor / inverse)
+  double max_jitter_ = 0.0;
+};
+
+struct FitOptions {
+  int max_evals = 1000;
+  double ftol_rel = 2.2e-9;      // scipy L-BFGS-B's default factr 1e7 * eps
+  double noise_floor = 1e-6;     // lower bound on the noise variance
+  bool learn_mean = false;       // optimise theta jointly (SPGP); else it stays fixed
+};
+
+struct FitResult {
+  Hyper hyper;
+  double lml = 0.0;
+  int evaluations = 0;
+  std::string stop;                     // NLopt's reason, e.g. "FTOL_REACHED"
+  std::vector<std::string> warnings;    // abnormal stops, jitter, failed evaluations
+};
+
+// Maximises the LML from `start` with NLopt's L-BFGS in log space, analytic gradients.
+FitResult fit(Likelihood& lik, const Hyper& start, const FitOptions& options);
+
+// The posterior for fixed hyper-parameters, for prediction.
+class Posterior {
+ public:
+  Posterior(const Likelihood& lik, const Hyper& hyper);
+  // phi_star: (O*m) x M regressor of the query points (ignored without a mean model).
+  // mean, var: m x O; var is the predictive variance of an observation (noise included).
+  void predict(const Eigen::MatrixXd& Xs, const Eigen::MatrixXd& phi_star, Eigen::MatrixXd* mean,
+               Eigen::MatrixXd* var) const;
+  double jitter() const { return jitter_; }
+
+ private:
+  Eigen::MatrixXd X_, L_, alpha_;
+  Hyper h_;
+  double jitter_ = 0.0;
+};
+
+// Factorises K + noise*I (lower triangle of K used) into `factor` (lower Cholesky factor).
+// A numerically singular matrix is retried with the jitter ladder
+// (sf2 + sn2) * 1e-10, 1e-9, ..., 1e-4 added to the diagonal. Returns the jitter used;
+// throws std::runtime_error when even the last rung fails.
+double cholesky_with_jitter(const Eigen::MatrixXd& K, double noise, double scale, Eigen::MatrixXd& factor);
+
+}  // namespace spml::gp

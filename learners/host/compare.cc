@@ -1,0 +1,249 @@
+#include "spml/learners/compare.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
+#include <limits>
+#include <map>
+#include <sstream>
+#include <stdexcept>
+
+#include "spml/dataset.h"
+#include "spml/learners/learner.h"
+
+namespace spml {
+namespace {
+
+namespace fs = std::filesystem;
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+std::vector<std::vector<std::string>> read_csv(const std::string& path, std::vector<std::string>* header) {
+  std::ifstream f(path);
+  if (!f) throw LearnerError(path + ": cannot open");
+  std::string line;
+  if (!std::getline(f, line)) throw LearnerError(path + ": empty file");
+  *header = split_list(line);
+  std::vector<std::vector<std::string>> rows;
+  int number = 1;
+  while (std::getline(f, line)) {
+    ++number;
+    if (line.empty()) continue;
+    std::vector<std::string> cells;
+    std::stringstream ss(line);
+    std::string cell;
+    while (std::getline(ss, cell, ',')) cells.push_back(cell);
+    if (!line.empty() && line.back() == ',') cells.push_back("");
+    if (cells.size() < header->size())
+      throw LearnerError(path + ": line " + std::to_string(number) + " has " + std::to_string(cells.size()) +
+                         " cells, the header " + std::to_string(header->size()));
+    rows.push_back(std::move(cells));
+  }
+  return rows;
+}
+
+double number(const std::string& text, const std::string& where, bool allow_missing) {
+  if (text == "inf") return std::numeric_limits<double>::infinity();
+  if (allow_missing && (text == "-" || text.empty())) return kNaN;
+  try {
+    size_t used = 0;
+    const double v = std::stod(text, &used);
+    if (used != text.size() || std::isnan(v)) throw std::invalid_argument("junk");
+    return v;
+  } catch (const std::exception&) {
+    throw LearnerError(where + ": '" + text + "' is not a number");
+  }
+}
+
+std::vector<ResultRow> parse_rows(const std::string& path, bool published) {
+  std::vector<std::string> header;
+  const auto rows = read_csv(path, &header);
+  auto column = [&](std::initializer_list<const char*> names) {
+    for (const char* n : names)
+      for (size_t i = 0; i < header.size(); ++i)
+        if (header[i] == n) return static_cast<int>(i);
+    return -1;
+  };
+  auto required = [&](std::initializer_list<const char*> names) {
+    const int c = column(names);
+    if (c < 0) throw LearnerError(path + ": column '" + *names.begin() + "' is missing");
+    return c;
+  };
+  const int algo = required({"algo"});
+  const int cols[8] = {required({"rmsemean"}), required({"rmsestd"}), required({"rmsemin", "rmseamin"}),
+                       required({"rmsemax", "rmseamax"}), required({"nllhmean"}), required({"nllhstd"}),
+                       required({"nllhmin", "nllhamin"}), required({"nllhmax", "nllhamax"})};
+  int scenario = -1, split = -1, output = -1, warnings = -1;
+  if (!published) {
+    scenario = required({"scenario"});
+    split = required({"split"});
+    output = required({"output"});
+    warnings = column({"warnings"});
+  }
+  std::vector<ResultRow> out;
+  int line = 1;
+  for (const auto& r : rows) {
+    ++line;
+    ResultRow row;
+    row.algo = canonical_algo(r[static_cast<size_t>(algo)]);
+    double* fields[8] = {&row.rmse_mean, &row.rmse_std, &row.rmse_min, &row.rmse_max,
+                         &row.nllh_mean, &row.nllh_std, &row.nllh_min, &row.nllh_max};
+    for (int k = 0; k < 8; ++k)
+      *fields[k] = number(r[static_cast<size_t>(cols[k])],
+                          path + ": line " + std::to_string(line) + " column '" + header[static_cast<size_t>(cols[k])] + "'",
+                          published);
+    if (!published) {
+      row.scenario = r[static_cast<size_t>(scenario)];
+      row.split = r[static_cast<size_t>(split)];
+      row.output = static_cast<int>(number(r[static_cast<size_t>(output)], path + ": line " + std::to_string(line) + " column 'output'", false));
+      if (warnings >= 0 && static_cast<size_t>(warnings) < r.size()) row.warnings = r[static_cast<size_t>(warnings)];
+    }
+    out.push_back(std::move(row));
+  }
+  return out;
+}
+
+std::vector<double> ranks(const std::vector<double>& v) {
+  std::vector<size_t> idx(v.size());
+  for (size_t i = 0; i < idx.size(); ++i) idx[i] = i;
+  std::sort(idx.begin(), idx.end(), [&](size_t a, size_t b) { return v[a] < v[b]; });
+  std::vector<double> r(v.size());
+  for (size_t i = 0; i < idx.size();) {
+    size_t j = i;
+    while (j + 1 < idx.size() && v[idx[j + 1]] == v[idx[i]]) ++j;
+    for (size_t k = i; k <= j; ++k) r[idx[k]] = 0.5 * static_cast<double>(i + j) + 1.0;   // ties share the mean rank
+    i = j + 1;
+  }
+  return r;
+}
+
+std::string num(double v, int precision = 2) {
+  if (std::isnan(v)) return "-";
+  if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
+  std::ostringstream s;
+  s << std::fixed << std::setprecision(precision) << v;
+  return s.str();
+}
+
+std::string delta(double ours, double paper) {
+  if (std::isnan(paper) || std::isinf(paper) || std::isinf(ours)) return "";
+  std::ostringstream s;
+  s << std::showpos << std::fixed << std::setprecision(2) << ours - paper;
+  return s.str();
+}
+
+}  // namespace
+
+std::string canonical_algo(const std::string& name) {
+  if (name == "SPGP-from-zeroes") return "SPGP-from-zeros";
+  return name;
+}
+
+std::vector<ResultRow> read_results(const std::string& path) { return parse_rows(path, false); }
+std::vector<ResultRow> read_published_table(const std::string& path) { return parse_rows(path, true); }
+
+std::string default_published_dir() { return SPML_PUBLISHED_DIR; }
+
+double spearman_rho(const std::vector<double>& a, const std::vector<double>& b) {
+  const std::vector<double> ra = ranks(a), rb = ranks(b);
+  const double n = static_cast<double>(a.size());
+  const double ma = (n + 1) / 2;
+  double sab = 0, saa = 0, sbb = 0;
+  for (size_t i = 0; i < a.size(); ++i) {
+    sab += (ra[i] - ma) * (rb[i] - ma);
+    saa += (ra[i] - ma) * (ra[i] - ma);
+    sbb += (rb[i] - ma) * (rb[i] - ma);
+  }
+  return saa > 0 && sbb > 0 ? sab / std::sqrt(saa * sbb) : kNaN;
+}
+
+double kendall_tau(const std::vector<double>& a, const std::vector<double>& b) {
+  double concordant = 0, discordant = 0, pairs = 0;
+  for (size_t i = 0; i < a.size(); ++i)
+    for (size_t j = i + 1; j < a.size(); ++j) {
+      const double s = (a[i] - a[j]) * (b[i] - b[j]);
+      if (s > 0) ++concordant;
+      if (s < 0) ++discordant;
+      ++pairs;
+    }
+  return pairs > 0 ? (concordant - discordant) / pairs : kNaN;
+}
+
+std::string compare_report(const std::vector<ResultRow>& results, const std::string& published_dir) {
+  // Which paper table belongs to which of our groups.
+  std::map<std::string, std::string> table_of;
+  {
+    std::vector<std::string> header;
+    const std::string index = (fs::path(published_dir) / "tables.csv").string();
+    for (const auto& r : read_csv(index, &header)) table_of[r[0] + "|" + r[1] + "|" + r[2]] = r[3];
+  }
+  std::vector<std::string> order;
+  std::map<std::string, std::vector<const ResultRow*>> groups;
+  for (const auto& r : results) {
+    const std::string key = r.scenario + "|" + r.split + "|" + std::to_string(r.output);
+    if (!groups.count(key)) order.push_back(key);
+    groups[key].push_back(&r);
+  }
+  std::ostringstream out;
+  for (const auto& key : order) {
+    const auto& rows = groups[key];
+    const ResultRow& first = *rows.front();
+    out << "\n== " << first.scenario << " / " << first.split << " / output " << first.output;
+    auto t = table_of.find(key);
+    std::map<std::string, ResultRow> paper;
+    std::vector<std::string> paper_order;
+    if (t == table_of.end()) {
+      out << "  (the paper has no table for this)\n";
+    } else {
+      out << "  (paper: " << t->second << ")\n";
+      for (auto& p : read_published_table((fs::path(published_dir) / t->second).string())) {
+        paper_order.push_back(p.algo);
+        paper[p.algo] = p;
+      }
+    }
+    out << std::left << std::setw(18) << "algo" << std::right << std::setw(16) << "RMSE ours" << std::setw(9) << "paper"
+        << std::setw(9) << "delta" << std::setw(16) << "NLLH ours" << std::setw(9) << "paper" << std::setw(9)
+        << "delta" << "\n";
+    std::vector<double> ours_rmse, paper_rmse;
+    std::vector<std::string> common;
+    for (const ResultRow* r : rows) {
+      auto p = paper.find(r->algo);
+      const double pr = p != paper.end() ? p->second.rmse_mean : kNaN;
+      const double pn = p != paper.end() ? p->second.nllh_mean : kNaN;
+      out << std::left << std::setw(18) << r->algo << std::right << std::setw(16)
+          << (num(r->rmse_mean) + "+-" + num(r->rmse_std)) << std::setw(9) << num(pr) << std::setw(9)
+          << delta(r->rmse_mean, pr) << std::setw(16) << num(r->nllh_mean) << std::setw(9) << num(pn)
+          << std::setw(9) << delta(r->nllh_mean, pn) << (r->warnings.empty() ? "" : "  !") << "\n";
+      if (p != paper.end()) {
+        ours_rmse.push_back(r->rmse_mean);
+        paper_rmse.push_back(pr);
+        common.push_back(r->algo);
+      }
+    }
+    for (const auto& a : paper_order) {
+      bool ran = false;
+      for (const ResultRow* r : rows) ran |= r->algo == a;
+      if (!ran) out << std::left << std::setw(18) << a << std::right << std::setw(16) << "(not run)" << std::setw(9)
+                    << num(paper[a].rmse_mean) << "\n";
+    }
+    if (common.size() >= 3) {
+      auto best = [&](const std::vector<double>& v) {
+        return common[static_cast<size_t>(std::min_element(v.begin(), v.end()) - v.begin())];
+      };
+      out << "rank agreement over " << common.size() << " learners (RMSE): Spearman rho " << num(spearman_rho(ours_rmse, paper_rmse))
+          << ", Kendall tau " << num(kendall_tau(ours_rmse, paper_rmse)) << "; best: ours " << best(ours_rmse)
+          << ", paper " << best(paper_rmse) << "\n";
+    }
+    bool any_warning = false;
+    for (const ResultRow* r : rows) any_warning |= !r->warnings.empty();
+    if (any_warning) {
+      out << "! warnings:\n";
+      for (const ResultRow* r : rows)
+        if (!r->warnings.empty()) out << "  " << r->algo << ": " << r->warnings << "\n";
+    }
+  }
+  return out.str();
+}
+
+}  // namespace spml

@@ -1,0 +1,53 @@
+// The shared evaluator: scores, repetitions, and `spml bench` (fit every learner on a
+// dataset's train split, predict every test split, aggregate over repetitions).
+#pragma once
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "spml/dataset.h"
+#include "spml/learners/learner.h"
+
+namespace spml {
+
+// Per output: root-mean-square error, and the mean negative log predictive density of a
+// Gaussian with the predicted variance (noise included); +inf without a variance.
+struct Scores {
+  std::vector<double> rmse, nllh;
+};
+Scores score(const LearnerMatrix& Y, const LearnerPrediction& p);
+
+// mean, std (population, ddof = 0 as numpy), min, max.
+struct Summary {
+  double mean = 0, std = 0, min = 0, max = 0;
+};
+Summary summarize(const std::vector<double>& values);
+
+struct BenchOptions {
+  std::string data;                 // spml/1 file
+  std::vector<std::string> learners;
+  int reps = 5;
+  std::uint64_t seed = 1;           // repetition r runs with seed + r
+  std::string out;                  // folder for results.csv, predictions.h5, units/
+  LearnerConfig config;             // key=values for every learner that accepts them
+  Eigen::Index train_max = 0;       // 0: all training rows; else an even stride down to at most this
+  Eigen::Index test_max = 5000;     // likewise per test split (0: all)
+  std::function<void(const std::string&)> log;   // progress lines; may be empty
+};
+
+struct BenchReport {
+  std::vector<std::string> failed;    // "learner: message"
+  std::vector<std::string> skipped;   // learners "all" left out, with the reason
+  int units_run = 0, units_cached = 0;
+};
+
+// Runs (or resumes) a benchmark. Finished (learner, repetition) units are kept in
+// out/units and reused by a rerun with the same data and settings; results.csv and
+// predictions.h5 are rewritten atomically from all finished units.
+BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& options, bool all_requested = false);
+
+// Rows actually used from a split of `rows` rows with a cap of `max` (0 = all): an even stride.
+std::vector<Eigen::Index> strided_rows(Eigen::Index rows, Eigen::Index max);
+
+}  // namespace spml

@@ -1,0 +1,97 @@
+/* spml learner plugin ABI, version 1.
+ *
+ * A learner is a shared library that exports two C functions:
+ *
+ *   int32_t spml_learner_abi_version(void);          returns SPML_LEARNER_ABI_VERSION
+ *   const spml_learner* spml_learner_get(int32_t i); i-th learner it provides, NULL past the end
+ *
+ * One library may provide several learners (the built-in library provides LLS, SVR, GP, ...).
+ * The host (spml bench) refuses a library whose version differs or that lacks either symbol,
+ * naming the file. Everything crosses the boundary as plain C data; no C++ types, no
+ * ownership transfer except the opaque state returned by fit() and released by destroy().
+ *
+ * Layout conventions
+ *   x   rows x inputs, row-major.       y   rows x outputs, row-major.
+ *   phi the parametric model's regressor, (outputs*rows) x params, row-major, output-major:
+ *       row o*rows + i holds phi_o(x_i), so that the model predicts y[i][o] = phi row . theta.
+ *   variance: the predictive variance of an observation (noise included), rows x outputs.
+ */
+#ifndef SPML_LEARNER_H
+#define SPML_LEARNER_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define SPML_LEARNER_ABI_VERSION 1
+
+/* flags */
+#define SPML_LEARNER_USES_MODEL      1u  /* reads phi/theta; the host must supply a parametric model */
+#define SPML_LEARNER_VARIANCE        2u  /* predict() fills the variance */
+#define SPML_LEARNER_PARAMETRIC      4u  /* purely parametric fit: may be the first stage of "A-B" */
+#define SPML_LEARNER_NONPARAMETRIC   8u  /* ignores phi: may be the residual stage of "A-B" */
+#define SPML_LEARNER_DETERMINISTIC  16u  /* ignores the seed: repetitions are identical */
+
+typedef struct spml_learner_data {
+  int64_t rows;
+  int32_t inputs;
+  int32_t outputs;
+  const double* x;      /* rows*inputs */
+  const double* y;      /* rows*outputs; NULL in predict() */
+  int32_t params;       /* columns of phi; 0 when there is no parametric model */
+  const double* phi;    /* (outputs*rows)*params, or NULL */
+} spml_learner_data;
+
+typedef struct spml_learner_model {
+  int32_t params;
+  const char* const* names;  /* params names */
+  const double* prior;       /* params values, or NULL when the dataset has none */
+  const double* truth;       /* params values, or NULL (measured data) */
+} spml_learner_model;
+
+typedef struct spml_learner_config {
+  int32_t count;
+  const char* const* keys;
+  const char* const* values;
+  uint64_t seed;
+} spml_learner_config;
+
+typedef struct spml_learner {
+  int32_t abi_version;       /* SPML_LEARNER_ABI_VERSION */
+  const char* name;          /* as in the paper's tables, e.g. "SPGP-SepKer" */
+  const char* summary;       /* one line */
+  uint32_t flags;
+  const char* config_keys;   /* comma-separated keys fit() accepts ("" for none) */
+
+  /* Fits and returns an opaque state, or NULL after writing a message into error. */
+  void* (*fit)(const spml_learner_data* train, const spml_learner_model* model,
+               const spml_learner_config* config, char* error, size_t error_size);
+  /* Writes rows*outputs means and, when variance is not NULL and the learner has the
+   * SPML_LEARNER_VARIANCE flag, rows*outputs variances. Returns 0, or non-zero after
+   * writing a message into error. */
+  int (*predict)(void* state, const spml_learner_data* query, double* mean, double* variance,
+                 char* error, size_t error_size);
+  /* Optional (may be NULL): warnings about the fit, e.g. an optimiser that stopped
+   * abnormally or a Cholesky that needed jitter; "" when there is nothing to report.
+   * The string lives as long as the state. */
+  const char* (*notes)(void* state);
+  /* Optional (may be NULL): writes the fitted parametric coefficients, returns how many
+   * (0 when the learner has none). */
+  int32_t (*coefficients)(void* state, double* theta, int32_t capacity);
+  void (*destroy)(void* state);
+} spml_learner;
+
+#if defined(_WIN32)
+#define SPML_LEARNER_EXPORT __declspec(dllexport)
+#else
+#define SPML_LEARNER_EXPORT __attribute__((visibility("default")))
+#endif
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* SPML_LEARNER_H */

@@ -1,0 +1,23 @@
+// Plain HDF5 files of named matrices, for results that are not datasets (bench units,
+// predictions.h5), and atomic writes of text files. Writes go to a temporary file that is
+// renamed into place, so a reader never sees half a file.
+#pragma once
+
+#include <map>
+#include <string>
+
+#include "spml/dataset.h"
+
+namespace spml {
+
+struct MatrixFile {
+  std::map<std::string, RowMatrix> matrices;           // "group/sub/name" -> matrix
+  std::map<std::string, std::string> attributes;       // root string attributes
+};
+
+void write_matrix_file(const std::string& path, const MatrixFile& file);
+MatrixFile read_matrix_file(const std::string& path);   // throws DatasetError naming the file
+
+void write_text_atomic(const std::string& path, const std::string& content);
+
+}  // namespace spml
