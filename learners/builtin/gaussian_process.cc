@@ -22,6 +22,7 @@ class GaussianProcess : public Learner {
     options.max_evals = static_cast<int>(config.number("max_evals", options.max_evals));
     options.noise_floor = config.number("noise_floor", options.noise_floor);
     options.learn_mean = kMean != MeanStart::kNone;
+    const bool standardize = config.number("standardize", 1.0) != 0.0;
     if (options.max_evals < 1) throw std::runtime_error("max_evals must be >= 1");
     if (!(options.noise_floor > 0)) throw std::runtime_error("noise_floor must be > 0");
 
@@ -37,14 +38,23 @@ class GaussianProcess : public Learner {
     const int groups = kSeparate ? static_cast<int>(O) : 1;
     for (int g = 0; g < groups; ++g) {
       Eigen::MatrixXd Y = kSeparate ? Eigen::MatrixXd(d.Y.col(g)) : Eigen::MatrixXd(d.Y);
+      // Work on targets scaled to unit RMS, so that "everything starts at 1.0" means
+      // sf2 = sn2 = mean(y^2) in data units. Raw 1.0 against torques of hundreds of Nm
+      // sends L-BFGS' first step to sf2 ~ 1e10, where the kernel matrix is singular.
+      const double rms = std::sqrt(Y.squaredNorm() / static_cast<double>(std::max<Eigen::Index>(1, Y.size())));
+      const double scale = standardize && rms > 0 ? rms : 1.0;
+      Y /= scale;
+      gp::Hyper first = start;
+      first.theta /= scale;
       Eigen::MatrixXd phi;
       if (M > 0) phi = kSeparate ? Eigen::MatrixXd(d.phi.middleRows(g * n, n)) : Eigen::MatrixXd(d.phi);
       auto lik = std::make_unique<gp::Likelihood>(X, std::move(Y), std::move(phi));
-      gp::FitResult r = gp::fit(*lik, start, options);
+      gp::FitResult r = gp::fit(*lik, first, options);
       for (const auto& w : r.warnings) add_note((kSeparate ? "output " + std::to_string(g) + ": " : std::string()) + w);
       posteriors_.emplace_back(*lik, r.hyper);
       if (posteriors_.back().jitter() > 0) add_note("posterior Cholesky needed jitter");
-      theta_.push_back(r.hyper.theta);
+      theta_.push_back(r.hyper.theta * scale);
+      scale_.push_back(scale);
     }
   }
 
@@ -63,8 +73,8 @@ class GaussianProcess : public Learner {
       for (Eigen::Index i = 0; i < m; ++i)
         for (Eigen::Index k = 0; k < mu.cols(); ++k) {
           const Eigen::Index o = kSeparate ? static_cast<Eigen::Index>(g) : k;
-          mean[i * O + o] = mu(i, k);
-          if (var) var[i * O + o] = v(i, k);
+          mean[i * O + o] = mu(i, k) * scale_[g];
+          if (var) var[i * O + o] = v(i, k) * scale_[g] * scale_[g];
         }
     }
   }
@@ -91,11 +101,12 @@ class GaussianProcess : public Learner {
 
   std::vector<gp::Posterior> posteriors_;
   std::vector<Eigen::VectorXd> theta_;
+  std::vector<double> scale_;   // per posterior: the target scale it was fitted in
   Eigen::Index outputs_ = 0;
 };
 
 constexpr uint32_t kGpFlags = SPML_LEARNER_VARIANCE | SPML_LEARNER_DETERMINISTIC;
-constexpr const char* kGpKeys = "max_evals,noise_floor";
+constexpr const char* kGpKeys = "max_evals,noise_floor,standardize";
 
 }  // namespace
 

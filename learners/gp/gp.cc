@@ -1,6 +1,9 @@
 #include "spml/gp/gp.h"
 
+#include <Eigen/Dense>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <limits>
 #include <nlopt.hpp>
 #include <sstream>
@@ -170,6 +173,26 @@ double Likelihood::evaluate(const Eigen::VectorXd& p, Eigen::VectorXd* grad) {
   return lml;
 }
 
+Eigen::VectorXd Likelihood::best_theta(const Eigen::VectorXd& p) {
+  const int n = static_cast<int>(X_.rows()), O = outputs(), M = params();
+  const Hyper h = unpack(p, inputs(), M);
+  kernel_lower(X_, h, kf_, nullptr);
+  max_jitter_ = std::max(max_jitter_, cholesky_with_jitter(kf_, h.noise_var, h.signal_var + h.noise_var, a_));
+  // theta = (sum_o phi_o^T K^-1 phi_o)^-1 sum_o phi_o^T K^-1 y_o
+  Eigen::MatrixXd A = Eigen::MatrixXd::Zero(M, M);
+  Eigen::VectorXd b = Eigen::VectorXd::Zero(M);
+  for (int o = 0; o < O; ++o) {
+    Eigen::MatrixXd rhs(n, M + 1);
+    rhs.leftCols(M) = phi_.middleRows(static_cast<Eigen::Index>(o) * n, n);
+    rhs.col(M) = Y_.col(o);
+    Eigen::MatrixXd sol = rhs;
+    solve_lower(a_, sol);
+    A += rhs.leftCols(M).transpose() * sol.leftCols(M);
+    b += rhs.leftCols(M).transpose() * sol.col(M);
+  }
+  return A.completeOrthogonalDecomposition().solve(b);
+}
+
 namespace {
 
 const char* nlopt_reason(nlopt::result r) {
@@ -218,6 +241,11 @@ double objective(unsigned n, const double* x, double* grad, void* data) {
   if (grad) {
     for (unsigned i = 0; i < n; ++i) grad[i] = g[i] * pr->scale[i];
   }
+  if (std::getenv("SPML_GP_TRACE")) {
+    std::fprintf(stderr, "eval %d lml %.6g jit %.3g p", pr->evaluations, v, pr->lik->max_jitter());
+    for (unsigned i = 0; i < std::min(n, 12u); ++i) std::fprintf(stderr, " %.3g", p[i]);
+    std::fprintf(stderr, "\n");
+  }
   if (v > pr->best) {
     pr->best = v;
     pr->best_x = u;
@@ -257,23 +285,41 @@ FitResult fit(Likelihood& lik, const Hyper& start, const FitOptions& options) {
   opt.set_ftol_rel(options.ftol_rel);
 
   FitResult res;
-  double value = 0.0;
-  try {
-    nlopt::result r = opt.optimize(x, value);
-    res.stop = nlopt_reason(r);
-    if (r == nlopt::MAXEVAL_REACHED)
-      res.warnings.push_back("L-BFGS stopped at max_evals=" + std::to_string(options.max_evals) + " before converging");
-  } catch (const nlopt::roundoff_limited&) {
-    res.stop = "ROUNDOFF_LIMITED";
-    res.warnings.push_back("L-BFGS stopped abnormally: roundoff-limited (best point kept)");
-  } catch (const nlopt::forced_stop&) {
-    res.stop = "FORCED_STOP";
-    res.warnings.push_back("L-BFGS stopped abnormally: evaluation failed (" +
-                           (pr.failures.empty() ? std::string("unknown") : pr.failures.front()) + "); best point kept");
-  } catch (const std::exception& e) {
-    res.stop = "FAILURE";
-    res.warnings.push_back(std::string("L-BFGS stopped abnormally: ") + e.what() + " (best point kept)");
+  auto run = [&] {
+    double value = 0.0;
+    std::string warning;
+    try {
+      nlopt::result r = opt.optimize(x, value);
+      res.stop = nlopt_reason(r);
+      if (r == nlopt::MAXEVAL_REACHED)
+        warning = "L-BFGS stopped at max_evals=" + std::to_string(options.max_evals) + " before converging";
+    } catch (const nlopt::roundoff_limited&) {
+      res.stop = "ROUNDOFF_LIMITED";
+      warning = "L-BFGS stopped abnormally: roundoff-limited (best point kept)";
+    } catch (const nlopt::forced_stop&) {
+      res.stop = "FORCED_STOP";
+      warning = "L-BFGS stopped abnormally: evaluation failed (" +
+                (pr.failures.empty() ? std::string("unknown") : pr.failures.front()) + "); best point kept";
+    } catch (const std::exception& e) {
+      res.stop = "FAILURE";
+      warning = std::string("L-BFGS stopped abnormally: ") + e.what() + " (best point kept)";
+    }
+    return warning;
+  };
+  std::string warning = run();
+  for (int round = 0; pr.learn_mean && pr.best_x.size() > 0 && round < options.theta_refinements; ++round) {
+    Eigen::VectorXd p = pr.fixed;
+    p.head(n_opt) = pr.best_x.cwiseProduct(pr.scale.head(n_opt));
+    try {
+      p.tail(M) = lik.best_theta(p);
+      if (!(lik.evaluate(p, nullptr) > pr.best + 1e-9 * std::abs(pr.best))) break;
+    } catch (const std::exception&) {
+      break;
+    }
+    for (int i = 0; i < n_opt; ++i) x[static_cast<size_t>(i)] = p[i] / pr.scale[i];
+    warning = run();
   }
+  if (!warning.empty()) res.warnings.push_back(warning);
   if (pr.best_x.size() == 0) {
     throw std::runtime_error("GP fit: no evaluation of the likelihood succeeded" +
                              (pr.failures.empty() ? std::string() : ": " + pr.failures.front()));

@@ -36,6 +36,9 @@ class Likelihood {
   int size() const { return inputs() + 2 + params(); }
   // Returns the LML; fills its gradient w.r.t. the packed parameters when grad != nullptr.
   double evaluate(const Eigen::VectorXd& p, Eigen::VectorXd* grad);
+  // The theta that maximises the LML for the kernel terms of p (a generalised least-squares
+  // solve: the LML is quadratic in theta).
+  Eigen::VectorXd best_theta(const Eigen::VectorXd& p);
   // Largest jitter the Cholesky ladder had to add so far (0 when never needed).
   double max_jitter() const { return max_jitter_; }
   const Eigen::MatrixXd& X() const { return X_; }
@@ -53,6 +56,10 @@ struct FitOptions {
   double ftol_rel = 2.2e-9;      // scipy L-BFGS-B's default factr 1e7 * eps
   double noise_floor = 1e-6;     // lower bound on the noise variance
   bool learn_mean = false;       // optimise theta jointly (SPGP); else it stays fixed
+  // With learn_mean: after L-BFGS stops, theta jumps to its exact conditional optimum
+  // (best_theta) and L-BFGS resumes, while that raises the LML, at most this many times.
+  // L-BFGS alone can stall where a large, smooth kernel has absorbed part of the model.
+  int theta_refinements = 3;
 };
 
 struct FitResult {
