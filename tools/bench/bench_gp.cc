@@ -1,0 +1,72 @@
+// GP benchmark: one log-marginal-likelihood + gradient evaluation (ARD RBF, every
+// hyper-parameter at 1.0, raw targets) on the first --rows training rows of a dataset, and
+// optionally a full SPGP fit (the built-in learner, through the plugin ABI) on the whole
+// train split. Prints one JSON object; tools/bench/gp_sklearn_peer.py runs scikit-learn on
+// the same rows and prints both side by side.
+#include <CLI/CLI.hpp>
+#include <algorithm>
+#include <chrono>
+#include <iostream>
+#include <nlohmann/json.hpp>
+
+#include "spml/envs/parametric_model.h"
+#include "spml/gp/gp.h"
+#include "spml/learners/learner.h"
+
+int main(int argc, char** argv) {
+  CLI::App app{"spml GP benchmark"};
+  std::string data;
+  long rows = 2000;
+  int output = 0, repeats = 5;
+  bool spgp_fit = false;
+  app.add_option("--data", data, "spml/1 dataset (train split is used)")->required()->check(CLI::ExistingFile);
+  app.add_option("--rows", rows, "Rows for the likelihood evaluation")->capture_default_str();
+  app.add_option("--output", output, "Output column for the likelihood evaluation")->capture_default_str();
+  app.add_option("--repeats", repeats, "Timed evaluations (the median is reported)")->capture_default_str();
+  app.add_flag("--spgp-fit", spgp_fit, "Also time a full SPGP fit on the whole train split");
+  CLI11_PARSE(app, argc, argv);
+  try {
+    const spml::Dataset ds = spml::read_dataset(data);
+    const spml::Split& train = ds.get("train");
+    const Eigen::Index n = std::min<Eigen::Index>(rows, train.rows());
+    spml::gp::Likelihood lik(train.X.topRows(n), train.Y.topRows(n).col(output));
+    spml::gp::Hyper h;
+    h.lengthscales = Eigen::VectorXd::Ones(train.X.cols());
+    const Eigen::VectorXd p = spml::gp::pack(h);
+    Eigen::VectorXd grad;
+    std::vector<double> times;
+    double lml = 0;
+    for (int r = 0; r < repeats; ++r) {
+      const auto t0 = std::chrono::steady_clock::now();
+      lml = lik.evaluate(p, &grad);
+      times.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    }
+    std::sort(times.begin(), times.end());
+    nlohmann::json out;
+    out["rows"] = n;
+    out["inputs"] = train.X.cols();
+    out["lml"] = lml;
+    out["grad_norm"] = grad.norm();
+    out["lml_grad_seconds"] = times[times.size() / 2];
+
+    if (spgp_fit) {
+      spml::LearnerRegistry registry;
+      registry.add_default_path();
+      auto learner = registry.create("SPGP");
+      auto model = spml::make_parametric_model(ds, train);
+      spml::LearnerMatrix X = train.X, Y = train.Y, phi = model->stacked(train.X);
+      spml::LearnerData d{&X, &Y, &phi, static_cast<int>(Y.cols())};
+      spml::LearnerModel m{ds.model.param_names, ds.model.prior, ds.model.truth};
+      const auto t0 = std::chrono::steady_clock::now();
+      learner->fit(d, m, spml::LearnerConfig{});
+      out["spgp_fit_rows"] = train.rows();
+      out["spgp_fit_seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      out["spgp_fit_notes"] = learner->notes();
+    }
+    std::cout << out.dump() << std::endl;
+  } catch (const std::exception& e) {
+    std::cerr << "bench_gp: error: " << e.what() << "\n";
+    return 1;
+  }
+  return 0;
+}
