@@ -1,0 +1,108 @@
+/* Ridge regression on the parametric model's features: theta = (A^T A + lambda I)^-1 A^T y
+ * over the stacked regressor. A complete spml learner in plain C, to show the ABI; the
+ * normal equations are small (params x params), so a plain Cholesky does. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "spml/learner.h"
+
+typedef struct {
+  int32_t params;
+  double* theta;
+} ridge_state;
+
+static void* ridge_fit(const spml_learner_data* d, const spml_learner_model* model, const spml_learner_config* config,
+                       char* error, size_t error_size) {
+  (void)model;
+  if (!d->phi || d->params <= 0) {
+    snprintf(error, error_size, "Ridge needs the dataset's parametric model");
+    return NULL;
+  }
+  double lambda = 1e-6;
+  for (int32_t i = 0; i < config->count; ++i)
+    if (strcmp(config->keys[i], "lambda") == 0) lambda = atof(config->values[i]);
+  const int32_t M = d->params;
+  const int64_t rows = d->rows * d->outputs;
+  double* A = calloc((size_t)(M * M), sizeof(double));
+  double* b = calloc((size_t)M, sizeof(double));
+  ridge_state* s = malloc(sizeof *s);
+  if (!A || !b || !s) {
+    snprintf(error, error_size, "out of memory");
+    free(A), free(b), free(s);
+    return NULL;
+  }
+  for (int64_t r = 0; r < rows; ++r) {
+    const double* phi = d->phi + r * M;
+    const int64_t o = r / d->rows, i = r % d->rows;
+    const double y = d->y[i * d->outputs + o];
+    for (int32_t j = 0; j < M; ++j) {
+      b[j] += phi[j] * y;
+      for (int32_t k = 0; k <= j; ++k) A[j * M + k] += phi[j] * phi[k];
+    }
+  }
+  for (int32_t j = 0; j < M; ++j) A[j * M + j] += lambda * (double)rows;
+  /* Cholesky A = L L^T in place (lower), then two triangular solves. */
+  for (int32_t j = 0; j < M; ++j) {
+    for (int32_t k = 0; k < j; ++k) A[j * M + j] -= A[j * M + k] * A[j * M + k];
+    if (A[j * M + j] <= 0) {
+      snprintf(error, error_size, "normal equations not positive definite; raise lambda");
+      free(A), free(b), free(s);
+      return NULL;
+    }
+    A[j * M + j] = sqrt(A[j * M + j]);
+    for (int32_t i = j + 1; i < M; ++i) {
+      for (int32_t k = 0; k < j; ++k) A[i * M + j] -= A[i * M + k] * A[j * M + k];
+      A[i * M + j] /= A[j * M + j];
+    }
+  }
+  for (int32_t i = 0; i < M; ++i) {
+    for (int32_t k = 0; k < i; ++k) b[i] -= A[i * M + k] * b[k];
+    b[i] /= A[i * M + i];
+  }
+  for (int32_t i = M - 1; i >= 0; --i) {
+    for (int32_t k = i + 1; k < M; ++k) b[i] -= A[k * M + i] * b[k];
+    b[i] /= A[i * M + i];
+  }
+  free(A);
+  s->params = M;
+  s->theta = b;
+  return s;
+}
+
+static int ridge_predict(void* state, const spml_learner_data* q, double* mean, double* variance, char* error,
+                         size_t error_size) {
+  (void)variance;
+  const ridge_state* s = state;
+  if (!q->phi || q->params != s->params) {
+    snprintf(error, error_size, "query regressor has %d columns, expected %d", q->params, s->params);
+    return 1;
+  }
+  for (int64_t r = 0; r < q->rows * q->outputs; ++r) {
+    double v = 0;
+    for (int32_t j = 0; j < s->params; ++j) v += q->phi[r * s->params + j] * s->theta[j];
+    mean[(r % q->rows) * q->outputs + r / q->rows] = v;
+  }
+  return 0;
+}
+
+static int32_t ridge_coefficients(void* state, double* theta, int32_t capacity) {
+  const ridge_state* s = state;
+  for (int32_t j = 0; j < capacity && j < s->params; ++j) theta[j] = s->theta[j];
+  return s->params;
+}
+
+static void ridge_destroy(void* state) {
+  ridge_state* s = state;
+  free(s->theta);
+  free(s);
+}
+
+static const spml_learner ridge = {
+    SPML_LEARNER_ABI_VERSION, "Ridge", "ridge regression on the model features (example)",
+    SPML_LEARNER_USES_MODEL | SPML_LEARNER_PARAMETRIC | SPML_LEARNER_DETERMINISTIC, "lambda",
+    ridge_fit, ridge_predict, NULL, ridge_coefficients, ridge_destroy};
+
+SPML_LEARNER_EXPORT int32_t spml_learner_abi_version(void) { return SPML_LEARNER_ABI_VERSION; }
+SPML_LEARNER_EXPORT const spml_learner* spml_learner_get(int32_t i) { return i == 0 ? &ridge : NULL; }

@@ -1,0 +1,244 @@
+// Learner plugins, compositions, the evaluator and the paper's regimes.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <map>
+
+#include "spml/envs/parametric_model.h"
+#include "spml/envs/scenarios.h"
+#include "spml/learners/compare.h"
+#include "spml/learners/evaluate.h"
+#include "test_util.h"
+
+namespace {
+
+namespace fs = std::filesystem;
+using namespace spml;
+
+LearnerRegistry& registry() {
+  static LearnerRegistry r = [] {
+    LearnerRegistry reg;
+    reg.add_default_path();
+    return reg;
+  }();
+  return r;
+}
+
+// A generated scenario written once per test binary run.
+std::string scenario_file(const std::string& name) {
+  static std::map<std::string, std::string> files;
+  if (!files.count(name)) {
+    const fs::path path = test::temp_dir("learners") / (name + ".h5");
+    GenerateOptions o;
+    o.seed = 1;
+    write_dataset(path.string(), generate_scenario(name, o));
+    files[name] = path.string();
+  }
+  return files[name];
+}
+
+// (split, output, algo) -> row
+std::map<std::string, ResultRow> results_by_key(const std::string& dir) {
+  std::map<std::string, ResultRow> m;
+  for (const auto& r : read_results(dir + "/results.csv")) m[r.split + "/" + std::to_string(r.output) + "/" + r.algo] = r;
+  return m;
+}
+
+TEST(LearnerRegistry, RefusesOtherAbiVersionNamingTheFile) {
+  LearnerRegistry reg;
+  const std::string file = std::string(SPML_TEST_LEARNER_DIR) + "/wrong_abi_learner.so";
+  try {
+    reg.add(file);
+    FAIL() << "loaded a library with ABI version 99";
+  } catch (const LearnerError& e) {
+    EXPECT_NE(std::string(e.what()).find("wrong_abi_learner.so"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("ABI version 99"), std::string::npos) << e.what();
+  }
+}
+
+TEST(LearnerRegistry, RefusesLibraryWithoutEntryPoints) {
+  LearnerRegistry reg;
+  try {
+    reg.add(std::string(SPML_TEST_LEARNER_DIR) + "/not_a_learner.so");
+    FAIL() << "loaded a library without learner symbols";
+  } catch (const LearnerError& e) {
+    EXPECT_NE(std::string(e.what()).find("not_a_learner.so"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("missing symbol spml_learner_abi_version"), std::string::npos) << e.what();
+  }
+}
+
+TEST(LearnerRegistry, KnowsThePaperRowsAndCompositions) {
+  for (const char* name : {"LLS", "SVR", "GP", "GP-SepKer", "SPGP", "SPGP-SepKer", "SPGP-from-zeros", "SPGP-from-ones",
+                           "LLS-prior", "LLS-simulated"})
+    EXPECT_NE(registry().plugin(name), nullptr) << name;
+  const auto list = registry().expand("LLS-GP,LLS-GP-SepKer,it-LLS-GP,SVR-GP,SVR-GP-SepKer,it-SVR-GP");
+  EXPECT_EQ(list.size(), 6u);
+  EXPECT_EQ(registry().create("it-SVR-GP-SepKer")->name(), "it-SVR-GP-SepKer");
+  try {
+    registry().expand("LLS,NoSuchLearner");
+    FAIL();
+  } catch (const LearnerError& e) {
+    EXPECT_NE(std::string(e.what()).find("unknown learner 'NoSuchLearner'"), std::string::npos) << e.what();
+  }
+  EXPECT_TRUE(registry().config_keys("it-LLS-GP").count("iterations"));
+  EXPECT_TRUE(registry().config_keys("SVR-GP").count("C"));
+}
+
+TEST(Evaluator, ScoresMatchClosedForm) {
+  LearnerMatrix Y(2, 1);
+  Y << 1.0, 2.0;
+  LearnerPrediction p;
+  p.mean = LearnerMatrix::Zero(2, 1);
+  Scores s = score(Y, p);
+  EXPECT_DOUBLE_EQ(s.rmse[0], std::sqrt(2.5));
+  EXPECT_TRUE(std::isinf(s.nllh[0]));
+  p.var.resize(2, 1);
+  p.var << 1.0, 4.0;
+  s = score(Y, p);
+  const double expected = 0.5 * ((0.5 * std::log(2 * M_PI) + 0.5) + (0.5 * std::log(8 * M_PI) + 0.5));
+  EXPECT_NEAR(s.nllh[0], expected, 1e-12);
+  const Summary sum = summarize({1.0, 2.0, 3.0, 6.0});
+  EXPECT_DOUBLE_EQ(sum.mean, 3.0);
+  EXPECT_DOUBLE_EQ(sum.std, std::sqrt(3.5));   // ddof = 0
+  EXPECT_DOUBLE_EQ(sum.min, 1.0);
+  EXPECT_DOUBLE_EQ(sum.max, 6.0);
+  const Summary inf = summarize({INFINITY, INFINITY});
+  EXPECT_TRUE(std::isinf(inf.mean));
+  EXPECT_EQ(inf.std, 0.0);
+  EXPECT_EQ(strided_rows(10, 4), (std::vector<Eigen::Index>{0, 3, 6, 9}));
+}
+
+TEST(Compare, RankAgreement) {
+  EXPECT_DOUBLE_EQ(spearman_rho({1, 2, 3, 4}, {10, 20, 30, 40}), 1.0);
+  EXPECT_DOUBLE_EQ(spearman_rho({1, 2, 3, 4}, {4, 3, 2, 1}), -1.0);
+  EXPECT_DOUBLE_EQ(kendall_tau({1, 2, 3}, {1, 3, 2}), 1.0 / 3.0);
+  EXPECT_EQ(canonical_algo("SPGP-from-zeroes"), "SPGP-from-zeros");
+}
+
+TEST(Composition, OneIterationEqualsSequential) {
+  const Dataset ds = read_dataset(scenario_file("toy"));
+  const Split& train = ds.get("train");
+  auto model = make_parametric_model(ds, train);
+  LearnerMatrix X = train.X, Y = train.Y, phi = model->stacked(train.X);
+  LearnerData d{&X, &Y, &phi, 1};
+  LearnerModel m{ds.model.param_names, ds.model.prior, ds.model.truth};
+  auto seq = registry().create("LLS-GP");
+  auto it1 = registry().create("it-LLS-GP");
+  LearnerConfig one;
+  one.values = {{"iterations", "1"}};
+  seq->fit(d, m, LearnerConfig{});
+  it1->fit(d, m, one);
+  LearnerData q{&X, nullptr, &phi, 1};
+  EXPECT_LT((seq->predict(q).mean - it1->predict(q).mean).cwiseAbs().maxCoeff(), 1e-12);
+  // ... and the composition's coefficients are LLS's.
+  auto lls = registry().create("LLS");
+  lls->fit(d, m, LearnerConfig{});
+  EXPECT_LT((seq->coefficients() - lls->coefficients()).norm(), 1e-12);
+}
+
+TEST(Bench, ToyReproducesThePapersRegime) {
+  BenchOptions o;
+  o.data = scenario_file("toy");
+  o.learners = {"LLS", "SVR", "GP", "SPGP", "LLS-GP", "SVR-GP"};
+  o.out = (test::temp_dir("bench-toy") / "out").string();
+  const BenchReport r = run_bench(registry(), o);
+  ASSERT_TRUE(r.failed.empty()) << r.failed.front();
+  auto res = results_by_key(o.out);
+  auto rmse = [&](const std::string& split, const std::string& algo) {
+    const std::string key = split + "/0/" + algo;
+    EXPECT_TRUE(res.count(key)) << key;
+    return res[key].rmse_mean;
+  };
+  // Interpolation: the noise is sigma = 0.5, the paper reports 0.52 for these four.
+  for (const char* a : {"GP", "SPGP", "LLS-GP", "SVR-GP"}) EXPECT_LE(rmse("test_interp", a), 0.56) << a;
+  // Extrapolation: robust SVR (and SVR-GP) beat LLS, which beats the zero-mean GP by far.
+  EXPECT_LT(rmse("test_extrap", "SVR"), rmse("test_extrap", "LLS"));
+  EXPECT_LT(rmse("test_extrap", "SVR-GP"), rmse("test_extrap", "LLS"));
+  EXPECT_LT(rmse("test_extrap", "LLS"), rmse("test_extrap", "GP"));
+  EXPECT_GE(rmse("test_extrap", "GP"), 5.0);
+  // NLLH: finite for GP learners, inf for the parametric ones, never NaN.
+  EXPECT_TRUE(std::isinf(res["test_interp/0/LLS"].nllh_mean));
+  EXPECT_LT(res["test_interp/0/SPGP"].nllh_mean, 1.0);   // Gaussian with sigma 0.5: 0.726
+}
+
+TEST(Bench, SimDynLocalBandSpgpBeatsLls) {
+  BenchOptions o;
+  o.data = scenario_file("simdyn-ll");
+  o.learners = {"LLS", "SPGP"};
+  o.train_max = 1000;   // every 5th of the 5000 training rows keeps the test fast
+  o.test_max = 2000;
+  o.reps = 1;
+  o.out = (test::temp_dir("bench-simdyn") / "out").string();
+  const BenchReport r = run_bench(registry(), o);
+  ASSERT_TRUE(r.failed.empty()) << r.failed.front();
+  auto res = results_by_key(o.out);
+  const double lls = res["test_interp/0/LLS"].rmse_mean, spgp = res["test_interp/0/SPGP"].rmse_mean;
+  EXPECT_GT(lls, 30.0);           // the band is outside the model: paper 38.43
+  EXPECT_LT(spgp, 0.7 * lls) << "SPGP " << spgp << " LLS " << lls;   // paper 19.07 vs 38.43
+}
+
+TEST(Bench, ResumesFinishedUnitsAndRefusesOtherSettings) {
+  BenchOptions o;
+  o.data = scenario_file("toy");
+  o.learners = {"LLS", "GP"};
+  o.reps = 2;
+  o.out = (test::temp_dir("bench-resume") / "out").string();
+  BenchReport first = run_bench(registry(), o);
+  EXPECT_EQ(first.units_run, 2);   // both deterministic: one fit each
+  std::ifstream a(o.out + "/results.csv");
+  const std::string before((std::istreambuf_iterator<char>(a)), {});
+  fs::remove(o.out + "/units/GP/rep0.h5");   // as if interrupted during GP
+  BenchReport second = run_bench(registry(), o);
+  EXPECT_EQ(second.units_cached, 1);
+  EXPECT_EQ(second.units_run, 1);
+  std::ifstream b(o.out + "/results.csv");
+  const std::string after((std::istreambuf_iterator<char>(b)), {});
+  auto strip_time = [](const std::string& s) {   // fit seconds differ between runs
+    std::string out;
+    std::stringstream ss(s);
+    std::string line;
+    while (std::getline(ss, line)) out += line.substr(0, line.rfind(',', line.rfind(',') - 1)) + "\n";
+    return out;
+  };
+  EXPECT_EQ(strip_time(before), strip_time(after));
+  o.train_max = 100;
+  EXPECT_THROW(run_bench(registry(), o), LearnerError);
+}
+
+TEST(Bench, RejectsConfigKeyNoLearnerTakes) {
+  BenchOptions o;
+  o.data = scenario_file("toy");
+  o.learners = {"LLS"};
+  o.out = (test::temp_dir("bench-config") / "out").string();
+  o.config.values = {{"max_evals", "10"}};   // only GP learners take it
+  try {
+    run_bench(registry(), o);
+    FAIL();
+  } catch (const LearnerError& e) {
+    EXPECT_NE(std::string(e.what()).find("config key 'max_evals'"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Cli, BenchAndCompare) {
+  const fs::path dir = test::temp_dir("cli-bench");
+  auto r = test::run(test::spml_bin() + " bench --data " + scenario_file("toy") + " --out " + (dir / "b").string() +
+                     " --learners LLS,SVR,SVR-GP --reps 2");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = test::run(test::spml_bin() + " compare --results " + (dir / "b" / "results.csv").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("toy_extrap_w_noise.csv"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("Spearman"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("(not run)"), std::string::npos) << r.output;
+  r = test::run(test::spml_bin() + " bench --data " + scenario_file("toy") + " --out " + (dir / "c").string() +
+                " --learners LLS,Nope");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("unknown learner 'Nope'"), std::string::npos) << r.output;
+  r = test::run(test::spml_bin() + " bench --data " + scenario_file("toy") + " --out " + (dir / "d").string() +
+                " --learner-path " + SPML_TEST_LEARNER_DIR + "/wrong_abi_learner.so --learners LLS");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("wrong_abi_learner.so"), std::string::npos) << r.output;
+}
+
+}  // namespace
