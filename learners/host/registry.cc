@@ -150,15 +150,14 @@ class SequentialLearner : public Learner {
            (fa & fb & SPML_LEARNER_DETERMINISTIC);
   }
   void fit(const LearnerData& train, const LearnerModel& model, const LearnerConfig& config) override {
-    int iterations = 1;
+    int iterations = iterative_ ? kDefaultIterations : 1;
     for (const auto& [k, v] : config.values)
-      if (k == "iterations" && iterative_) iterations = std::atoi(v.c_str());
-    if (iterative_) {
-      bool given = false;
-      for (const auto& kv : config.values) given |= kv.first == "iterations";
-      if (!given) iterations = kDefaultIterations;
-      if (iterations < 1) throw LearnerError(name_ + ": iterations must be >= 1");
-    }
+      if (k == "iterations" && iterative_) {
+        char* end = nullptr;
+        iterations = static_cast<int>(std::strtol(v.c_str(), &end, 10));
+        if (v.empty() || *end != '\0' || iterations < 1)
+          throw LearnerError(name_ + ": config 'iterations' must be an integer >= 1, got '" + v + "'");
+      }
     const LearnerMatrix& Y = *train.Y;
     LearnerData part = train;
     LearnerMatrix target = Y;
