@@ -116,10 +116,12 @@ void add_gaussian_process_learners(std::vector<spml_learner>& out) {
   out.push_back(make_learner<GaussianProcess<MeanStart::kNone, true>>(
       "GP-SepKer", "one GP per output, ARD RBF kernel, zero mean", kGpFlags | SPML_LEARNER_NONPARAMETRIC, kGpKeys));
   out.push_back(make_learner<GaussianProcess<MeanStart::kPrior, false>>(
-      "SPGP", "GP with mean phi(x).theta, theta learnt jointly, from the prior", kGpFlags | SPML_LEARNER_USES_MODEL,
+      "SPGP", "GP with mean phi(x).theta, theta learnt jointly, from the prior",
+      kGpFlags | SPML_LEARNER_USES_MODEL | SPML_LEARNER_NEEDS_PRIOR,
       kGpKeys));
   out.push_back(make_learner<GaussianProcess<MeanStart::kPrior, true>>(
-      "SPGP-SepKer", "SPGP with kernel and theta per output, from the prior", kGpFlags | SPML_LEARNER_USES_MODEL,
+      "SPGP-SepKer", "SPGP with kernel and theta per output, from the prior",
+      kGpFlags | SPML_LEARNER_USES_MODEL | SPML_LEARNER_NEEDS_PRIOR,
       kGpKeys));
   out.push_back(make_learner<GaussianProcess<MeanStart::kZeros, false>>(
       "SPGP-from-zeros", "SPGP started from theta = 0", kGpFlags | SPML_LEARNER_USES_MODEL, kGpKeys));

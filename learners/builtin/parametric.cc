@@ -19,6 +19,14 @@ Eigen::VectorXd stacked_targets(const View& d) {
   return b;
 }
 
+// Least squares on the stacked regressor. The complete orthogonal decomposition gives the
+// minimum-norm solution when the data do not excite every parameter (rank-deficient phi).
+Eigen::VectorXd least_squares(const View& d, Eigen::Index* rank) {
+  Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(Eigen::MatrixXd(d.phi));
+  *rank = cod.rank();
+  return cod.solve(stacked_targets(d));
+}
+
 // A linear-in-parameters model with coefficients theta; subclasses decide theta.
 class LinearModel : public Learner {
  public:
@@ -45,13 +53,10 @@ class LeastSquares : public LinearModel {
  public:
   void fit(const View& d, const spml_learner_model& model, const Config&) override {
     require_model(d, model, "LLS");
-    Eigen::MatrixXd A = d.phi;
-    // Complete orthogonal decomposition: the minimum-norm solution if the data do not
-    // excite every parameter (rank-deficient regressor).
-    Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(A);
-    theta_ = cod.solve(stacked_targets(d));
-    if (cod.rank() < A.cols())
-      notes = "regressor rank " + std::to_string(cod.rank()) + " < " + std::to_string(A.cols()) +
+    Eigen::Index rank = 0;
+    theta_ = least_squares(d, &rank);
+    if (rank < d.phi.cols())
+      notes = "regressor rank " + std::to_string(rank) + " < " + std::to_string(d.phi.cols()) +
               " parameters: minimum-norm solution";
   }
 };
@@ -90,8 +95,8 @@ class SupportVectorRegression : public LinearModel {
     const double mean = y.mean();
     const double sd = std::sqrt((y.array() - mean).square().mean());
     const double C_default = std::max(std::abs(mean + 3 * sd), std::abs(mean - 3 * sd));
-    Eigen::MatrixXd A = d.phi;
-    const Eigen::VectorXd r = y - A * A.completeOrthogonalDecomposition().solve(y);
+    Eigen::Index rank = 0;
+    const Eigen::VectorXd r = y - d.phi * least_squares(d, &rank);
     const double sigma = std::sqrt(r.squaredNorm() / static_cast<double>(n));
     const double eps_default = 3.0 * sigma * std::sqrt(std::log(static_cast<double>(n)) / static_cast<double>(n));
     const double C = config.number("C", C_default > 0 ? C_default : 1.0);
@@ -138,12 +143,14 @@ spml_learner lls_learner() {
 }
 spml_learner lls_prior_learner() {
   return make_learner<FixedCoefficients<false>>("LLS-prior", "the model with the dataset's prior coefficients, no fit",
-                                                SPML_LEARNER_USES_MODEL | SPML_LEARNER_DETERMINISTIC, "");
+                                                SPML_LEARNER_USES_MODEL | SPML_LEARNER_DETERMINISTIC |
+                                                    SPML_LEARNER_NEEDS_PRIOR, "");
 }
 spml_learner lls_simulated_learner() {
   return make_learner<FixedCoefficients<true>>("LLS-simulated",
                                                "the model with the simulation's true coefficients, no fit",
-                                               SPML_LEARNER_USES_MODEL | SPML_LEARNER_DETERMINISTIC, "");
+                                               SPML_LEARNER_USES_MODEL | SPML_LEARNER_DETERMINISTIC |
+                                                   SPML_LEARNER_NEEDS_TRUTH, "");
 }
 spml_learner svr_learner() {
   return make_learner<SupportVectorRegression>(

@@ -9,6 +9,7 @@
 #include <fstream>
 #include <iomanip>
 #include <limits>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
@@ -139,17 +140,16 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bo
   // Which learners can run here; "all" quietly leaves out what the data cannot support.
   BenchReport report;
   std::vector<std::string> learners;
+  std::map<std::string, std::uint32_t> flags;
   for (const auto& name : o.learners) {
-    auto probe = registry.create(name);
+    const std::uint32_t f = registry.create(name)->flags();
     std::string why;
-    if (probe->uses_model() && !model) why = "needs a parametric model: " + model_problem;
-    else if (name.find("LLS-simulated") != std::string::npos && ds.model.truth.size() == 0)
-      why = "the dataset has no true coefficients";
-    else if ((name.find("LLS-prior") != std::string::npos || name.rfind("SPGP", 0) == 0) &&
-             name.find("-from-") == std::string::npos && ds.model.prior.size() == 0)
-      why = "the dataset has no prior coefficients";
+    if ((f & SPML_LEARNER_USES_MODEL) && !model) why = "needs a parametric model: " + model_problem;
+    else if ((f & SPML_LEARNER_NEEDS_TRUTH) && ds.model.truth.size() == 0) why = "the dataset has no true coefficients";
+    else if ((f & SPML_LEARNER_NEEDS_PRIOR) && ds.model.prior.size() == 0) why = "the dataset has no prior coefficients";
     if (why.empty()) {
       learners.push_back(name);
+      flags[name] = f;
     } else if (all_requested) {
       report.skipped.push_back(name + ": " + why);
     } else {
@@ -215,7 +215,7 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bo
   for (size_t li = 0; li < learners.size(); ++li) {
     const std::string& name = learners[li];
     auto learner = registry.create(name);
-    const int fits = (learner->flags() & SPML_LEARNER_DETERMINISTIC) ? 1 : o.reps;
+    const int fits = (flags[name] & SPML_LEARNER_DETERMINISTIC) ? 1 : o.reps;
     for (int rep = 0; rep < fits; ++rep) {
       const std::string path = unit_path(o.out, name, rep);
       std::ostringstream tag;
@@ -286,7 +286,7 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bo
       if (fs::exists(path)) units.push_back(read_matrix_file(path));
     }
     if (units.empty()) continue;
-    const bool deterministic = registry.create(name)->flags() & SPML_LEARNER_DETERMINISTIC;
+    const bool deterministic = flags[name] & SPML_LEARNER_DETERMINISTIC;
     // A deterministic learner is fitted once; its repetitions are that fit by construction.
     if (!deterministic && static_cast<int>(units.size()) < o.reps) continue;   // incomplete: rerun finishes it
     double fitsec = 0;

@@ -146,8 +146,9 @@ class SequentialLearner : public Learner {
   std::string name() const override { return name_; }
   std::uint32_t flags() const override {
     const std::uint32_t fa = a_->flags(), fb = b_->flags();
-    return ((fa | fb) & SPML_LEARNER_USES_MODEL) | ((fa | fb) & SPML_LEARNER_VARIANCE) |
-           (fa & fb & SPML_LEARNER_DETERMINISTIC);
+    constexpr std::uint32_t kEither =
+        SPML_LEARNER_USES_MODEL | SPML_LEARNER_VARIANCE | SPML_LEARNER_NEEDS_PRIOR | SPML_LEARNER_NEEDS_TRUTH;
+    return ((fa | fb) & kEither) | (fa & fb & SPML_LEARNER_DETERMINISTIC);
   }
   void fit(const LearnerData& train, const LearnerModel& model, const LearnerConfig& config) override {
     int iterations = iterative_ ? kDefaultIterations : 1;

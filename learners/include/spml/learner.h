@@ -34,6 +34,8 @@ extern "C" {
 #define SPML_LEARNER_PARAMETRIC      4u  /* purely parametric fit: may be the first stage of "A-B" */
 #define SPML_LEARNER_NONPARAMETRIC   8u  /* ignores phi: may be the residual stage of "A-B" */
 #define SPML_LEARNER_DETERMINISTIC  16u  /* ignores the seed: repetitions are identical */
+#define SPML_LEARNER_NEEDS_PRIOR    32u  /* fit() fails without the model's prior coefficients */
+#define SPML_LEARNER_NEEDS_TRUTH    64u  /* fit() fails without the model's true coefficients */
 
 typedef struct spml_learner_data {
   int64_t rows;
