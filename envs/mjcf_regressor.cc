@@ -1,7 +1,9 @@
 #include "spml/envs/mjcf_regressor.h"
 
 #include <Eigen/Dense>
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <random>
 #include <sstream>
 
@@ -45,8 +47,11 @@ Eigen::Matrix<double, 6, 10> body_wrench(const Eigen::Vector3d& w, const Eigen::
 }  // namespace
 
 MjcfRegressor::MjcfRegressor(const std::string& mjcf_file, const RegressorOptions& options)
-    : m_(load_mjcf(mjcf_file)), d_(make_data(m_.get())), options_(options) {
+    : m_(load_mjcf(mjcf_file)), options_(options) {
   const mjModel* m = m_.get();
+  if (m->njnt == 0)
+    throw std::runtime_error(mjcf_file + ": the model has no joints, so there is nothing to identify (a regressor "
+                                         "needs at least one hinge or slide joint)");
   for (int j = 0; j < m->njnt; ++j)
     if (m->jnt_type[j] != mjJNT_HINGE && m->jnt_type[j] != mjJNT_SLIDE)
       throw std::runtime_error(mjcf_file + ": joint '" + mj_id2name(m, mjOBJ_JOINT, j) +
@@ -102,10 +107,10 @@ MjcfRegressor::MjcfRegressor(const std::string& mjcf_file, const RegressorOption
 
 MjcfRegressor::~MjcfRegressor() = default;
 
-Eigen::MatrixXd MjcfRegressor::evaluate(const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+Eigen::MatrixXd MjcfRegressor::evaluate(Workspace& ws, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
                                         const Eigen::VectorXd& qdd) const {
   const mjModel* m = m_.get();
-  mjData* d = d_.get();
+  mjData* d = ws.d.get();
   const int nv = m->nv;
   for (int j = 0; j < m->njnt; ++j) {
     d->qpos[m->jnt_qposadr[j]] = q[j];
@@ -174,6 +179,7 @@ MjcfRegressor::Base MjcfRegressor::base_parameters(int samples, std::uint64_t se
   const int nv = m->nv, np = static_cast<int>(names_.size());
   Eigen::MatrixXd W(static_cast<Eigen::Index>(samples) * nv, np);
   Eigen::VectorXd q(m->njnt), qd(m->njnt), qdd(m->njnt);
+  Workspace ws = workspace();
   for (int s = 0; s < samples; ++s) {
     for (int j = 0; j < m->njnt; ++j) {
       double lo = -M_PI, hi = M_PI;
@@ -183,7 +189,7 @@ MjcfRegressor::Base MjcfRegressor::base_parameters(int samples, std::uint64_t se
       qd[j] = 3 * u(rng);
       qdd[j] = 10 * u(rng);
     }
-    W.middleRows(static_cast<Eigen::Index>(s) * nv, nv) = evaluate(q, qd, qdd);
+    W.middleRows(static_cast<Eigen::Index>(s) * nv, nv) = evaluate(ws, q, qd, qdd);
   }
   // Scale columns to unit norm so the rank decision does not depend on units.
   Eigen::VectorXd scale = W.colwise().norm().transpose();
@@ -222,30 +228,56 @@ MjcfRegressor::Base MjcfRegressor::base_parameters(int samples, std::uint64_t se
   return base;
 }
 
+JointColumns::JointColumns(const MjcfRegressor& reg, const Split& s) {
+  for (const auto& j : reg.joint_names()) {
+    for (auto [prefix, vec] : {std::pair<const char*, std::vector<int>*>{"q:", &q}, {"qd:", &qd}, {"qdd:", &qdd}}) {
+      const int c = s.x_index(prefix + j);
+      if (c < 0) throw DatasetError("split '" + s.name + "': no input column '" + prefix + j + "' for model joint '" + j + "'");
+      vec->push_back(c);
+    }
+  }
+  for (const auto& col : s.y_columns) {
+    const auto& names = reg.joint_names();
+    const auto it = col.rfind("tau:", 0) == 0 ? std::find(names.begin(), names.end(), col.substr(4)) : names.end();
+    if (it == names.end())
+      throw DatasetError("split '" + s.name + "': target column '" + col + "' is not tau:<joint> of a model joint");
+    output_dof.push_back(reg.model()->jnt_dofadr[it - names.begin()]);
+  }
+}
+
+Eigen::MatrixXd stacked_base_regressor(const MjcfRegressor& reg, const MjcfRegressor::Base& base, const Split& s,
+                                       const JointColumns& cols) {
+  const Eigen::Index N = s.rows();
+  const auto O = static_cast<Eigen::Index>(cols.output_dof.size());
+  const auto J = cols.q.size();
+  Eigen::MatrixXd A(N * O, base.rank);
+  Eigen::VectorXd q(J), qd(J), qdd(J);
+  auto ws = reg.workspace();
+  for (Eigen::Index r = 0; r < N; ++r) {
+    for (size_t j = 0; j < J; ++j) {
+      q[j] = s.X(r, cols.q[j]);
+      qd[j] = s.X(r, cols.qd[j]);
+      qdd[j] = s.X(r, cols.qdd[j]);
+    }
+    const Eigen::MatrixXd Y = base.Y_base(reg.evaluate(ws, q, qd, qdd));
+    if (!Y.allFinite())
+      throw DatasetError("split '" + s.name + "' row " + std::to_string(r) +
+                         ": the regressor is not finite there (a value too large for the model's dynamics?)");
+    for (Eigen::Index o = 0; o < O; ++o) A.row(o * N + r) = Y.row(cols.output_dof[static_cast<size_t>(o)]);
+  }
+  return A;
+}
+
 Identification identify(const MjcfRegressor& reg, const MjcfRegressor::Base& base, const Dataset& ds,
                         const std::string& split) {
-  const auto& joints = reg.joint_names();
-  const int nv = reg.nv();
   auto stack = [&](const Split& s, Eigen::MatrixXd& A, Eigen::VectorXd& b) {
-    std::vector<int> qi, vi, ai, ti;
-    for (const auto& j : joints) {
-      for (auto [prefix, vec] : {std::pair<const char*, std::vector<int>*>{"q:", &qi}, {"qd:", &vi}, {"qdd:", &ai}}) {
-        int c = s.x_index(prefix + j);
-        if (c < 0) throw DatasetError("split '" + s.name + "': no column '" + prefix + j + "' for model joint '" + j + "'");
-        vec->push_back(c);
-      }
-      int c = s.y_index("tau:" + j);
-      if (c < 0) throw DatasetError("split '" + s.name + "': no target column 'tau:" + j + "' for model joint '" + j + "'");
-      ti.push_back(c);
+    try {
+      const JointColumns cols(reg, s);
+      A = stacked_base_regressor(reg, base, s, cols);
+    } catch (const DatasetError& e) {
+      throw DatasetError((ds.source.empty() ? "" : ds.source + ": ") + e.what());
     }
-    A.resize(s.rows() * nv, base.rank);
-    b.resize(s.rows() * nv);
-    Eigen::VectorXd q(joints.size()), qd(joints.size()), qdd(joints.size());
-    for (Eigen::Index r = 0; r < s.rows(); ++r) {
-      for (size_t j = 0; j < joints.size(); ++j) { q[j] = s.X(r, qi[j]); qd[j] = s.X(r, vi[j]); qdd[j] = s.X(r, ai[j]); }
-      A.middleRows(r * nv, nv) = base.Y_base(reg.evaluate(q, qd, qdd));
-      for (size_t j = 0; j < joints.size(); ++j) b[r * nv + reg.model()->jnt_dofadr[j]] = s.Y(r, ti[j]);
-    }
+    b = stacked_targets(s.Y);
   };
   Identification out;
   out.names = base.names;
@@ -254,26 +286,48 @@ Identification identify(const MjcfRegressor& reg, const MjcfRegressor::Base& bas
   Eigen::VectorXd b;
   const Split& train = ds.get(split);
   stack(train, A, b);
-  Eigen::JacobiSVD<Eigen::MatrixXd> svd(A, Eigen::ComputeThinU | Eigen::ComputeThinV);
-  out.estimate = svd.solve(b);
+  const std::string where = (ds.source.empty() ? "" : ds.source + ": ") + "split '" + split + "'";
+  if (A.rows() <= A.cols())
+    throw DatasetError(where + ": " + std::to_string(A.rows()) + " equations (" + std::to_string(train.rows()) +
+                       " rows x " + std::to_string(train.Y.cols()) + " torques) for " + std::to_string(A.cols()) +
+                       " base parameters: too few rows to identify them and estimate the noise");
+  // Columns scaled to unit norm, so that the rank decision does not depend on units.
+  Eigen::VectorXd scale = A.colwise().norm().transpose();
+  for (Eigen::Index c = 0; c < A.cols(); ++c) scale[c] = scale[c] > 0 ? scale[c] : 1.0;
+  const Eigen::MatrixXd As = A * scale.cwiseInverse().asDiagonal();
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(As, Eigen::ComputeThinU | Eigen::ComputeThinV);
   const auto& sv = svd.singularValues();
-  out.condition = sv[0] / sv[sv.size() - 1];
+  out.condition = sv[0] > 0 ? sv[0] / sv[sv.size() - 1] : std::numeric_limits<double>::infinity();
+  if (!(out.condition < 1e10)) {
+    // Name the parameters the data leave free: the largest entries of the weakest direction.
+    const Eigen::VectorXd v = svd.matrixV().col(sv.size() - 1);
+    std::vector<std::pair<double, int>> w;
+    for (int i = 0; i < v.size(); ++i) w.emplace_back(-std::fabs(v[i]), i);
+    std::sort(w.begin(), w.end());
+    std::string names;
+    for (size_t i = 0; i < w.size() && i < 3 && -w[i].first > 0.1; ++i) names += (names.empty() ? "" : "; ") + out.names[w[i].second];
+    throw DatasetError(where + ": the data do not excite every base parameter (condition number " + fmt(out.condition) +
+                       "): not identifiable from this data: " + names +
+                       " (does every joint move, with varying speed and acceleration?)");
+  }
+  out.estimate = scale.cwiseInverse().asDiagonal() * svd.solve(b);
   const double dof = static_cast<double>(A.rows() - A.cols());
   out.sigma = std::sqrt((b - A * out.estimate).squaredNorm() / dof);
-  // (A^T A)^-1 = V S^-2 V^T
-  Eigen::MatrixXd cov = svd.matrixV() * sv.cwiseInverse().cwiseAbs2().asDiagonal() * svd.matrixV().transpose();
+  // (A^T A)^-1 = D^-1 V S^-2 V^T D^-1 with D the column scales.
+  const Eigen::MatrixXd Vs = scale.cwiseInverse().asDiagonal() * svd.matrixV();
+  Eigen::MatrixXd cov = Vs * sv.cwiseInverse().cwiseAbs2().asDiagonal() * Vs.transpose();
   out.std_error = (out.sigma * out.sigma * cov.diagonal()).cwiseSqrt();
-  auto score = [&](const Split& s, const Eigen::MatrixXd& As, const Eigen::VectorXd& bs) {
-    Eigen::VectorXd r = bs - As * out.estimate;
+  auto score = [&](const Split& s, const Eigen::MatrixXd& As_, const Eigen::VectorXd& bs) {
+    Eigen::VectorXd r = bs - As_ * out.estimate;
     out.errors.push_back({s.name, s.rows(), r.norm() / bs.norm(), std::sqrt(r.squaredNorm() / static_cast<double>(bs.size()))});
   };
   score(train, A, b);
   for (const Split& s : ds.splits) {
     if (s.name == split) continue;
-    Eigen::MatrixXd As;
+    Eigen::MatrixXd As2;
     Eigen::VectorXd bs;
-    stack(s, As, bs);
-    score(s, As, bs);
+    stack(s, As2, bs);
+    score(s, As2, bs);
   }
   return out;
 }

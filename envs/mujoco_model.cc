@@ -4,9 +4,8 @@
 #include <filesystem>
 #include <stdexcept>
 
-#ifndef SPML_SOURCE_MJCF_DIR
-#define SPML_SOURCE_MJCF_DIR "mjcf"
-#endif
+#include "spml/plugin_loader.h"
+
 
 namespace spml {
 
@@ -19,8 +18,8 @@ ModelPtr load_mjcf(const std::string& path) {
 }
 
 std::string mjcf_dir() {
-  if (const char* env = std::getenv("SPML_MJCF_DIR")) return env;
-  return SPML_SOURCE_MJCF_DIR;
+  if (const char* env = std::getenv("SPML_MJCF_DIR"); env && *env) return env;
+  return (std::filesystem::path(spml_share_dir()) / "mjcf").string();
 }
 
 std::string mjcf_path(const std::string& file) { return (std::filesystem::path(mjcf_dir()) / file).string(); }

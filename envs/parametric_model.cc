@@ -1,99 +1,145 @@
 #include "spml/envs/parametric_model.h"
 
-#include "spml/envs/planar_arm3.h"
-#include "spml/envs/scenarios.h"
+#include <filesystem>
+#include <map>
+#include <mutex>
+
+#include <unistd.h>
+
+#include "spml/envs/mjcf_regressor.h"
+#include "spml/matrix_file.h"
+#include "spml/plugin_loader.h"
 
 namespace spml {
 namespace {
 
-int require_column(const Split& s, const std::string& column, const std::string& model) {
-  int i = s.x_index(column);
-  if (i < 0) throw DatasetError("split '" + s.name + "': model '" + model + "' needs input column '" + column + "'");
-  return i;
+namespace fs = std::filesystem;
+
+std::map<std::string, ParametricModelFactory>& factories() {
+  static std::map<std::string, ParametricModelFactory> f;
+  return f;
 }
 
-class ToyModel : public ParametricModel {
+// Any MJCF through its identification regressor, on base parameters.
+class MjcfModel : public ParametricModel {
  public:
-  explicit ToyModel(const Split& s) : x_(require_column(s, "x", "toy")) {}
-  std::string name() const override { return "toy"; }
-  int num_params() const override { return 4; }
-  int num_outputs() const override { return 1; }
-  Eigen::MatrixXd features(const Eigen::Ref<const Eigen::RowVectorXd>& x) const override {
-    return toy_features(x[x_]).transpose();
+  MjcfModel(const std::string& file, const Dataset& ds, const Split& layout)
+      : file_(file), reg_(file), base_(reg_.base_parameters()), cols_(reg_, layout) {
+    param_names = base_.names;
+    prior = base_.model_values;
+    outputs = static_cast<int>(layout.Y.cols());
+    // The dataset's truth applies when it is stated in these same parameters.
+    if (ds.model.param_names == param_names && ds.model.truth.size() == num_params()) truth = ds.model.truth;
   }
+  std::string name() const override { return "mjcf:" + file_; }
+  Eigen::MatrixXd stacked(const RowMatrix& X) const override {
+    Split s;
+    s.name = "(query)";
+    s.X = X;
+    return stacked_base_regressor(reg_, base_, s, cols_);
+  }
+
  private:
-  int x_;
+  std::string file_;
+  MjcfRegressor reg_;
+  MjcfRegressor::Base base_;
+  JointColumns cols_;
 };
 
-class ViaModel : public ParametricModel {
- public:
-  explicit ViaModel(const Split& s)
-      : d_(require_column(s, "deflection", "via")), r_(require_column(s, "deflection_rate", "via")) {}
-  std::string name() const override { return "via"; }
-  int num_params() const override { return 2; }
-  int num_outputs() const override { return 1; }
-  Eigen::MatrixXd features(const Eigen::Ref<const Eigen::RowVectorXd>& x) const override {
-    Eigen::MatrixXd phi(1, 2);
-    phi << x[d_], x[r_];
-    return phi;
-  }
- private:
-  int d_, r_;
-};
-
-class PlanarArm3Model : public ParametricModel {
- public:
-  explicit PlanarArm3Model(const Split& s) {
-    const char* joints[3] = {"joint0", "joint1", "joint2"};
-    for (int j = 0; j < 3; ++j) {
-      q_[j] = require_column(s, std::string("q:") + joints[j], "planar_arm3");
-      qd_[j] = require_column(s, std::string("qd:") + joints[j], "planar_arm3");
-      qdd_[j] = require_column(s, std::string("qdd:") + joints[j], "planar_arm3");
-    }
-  }
-  std::string name() const override { return "planar_arm3"; }
-  int num_params() const override { return planar_arm3::kParams; }
-  int num_outputs() const override { return 3; }
-  Eigen::MatrixXd features(const Eigen::Ref<const Eigen::RowVectorXd>& x) const override {
-    Eigen::Vector3d q, qd, qdd;
-    for (int j = 0; j < 3; ++j) { q[j] = x[q_[j]]; qd[j] = x[qd_[j]]; qdd[j] = x[qdd_[j]]; }
-    return planar_arm3::regressor(q, qd, qdd);
-  }
- private:
-  int q_[3], qd_[3], qdd_[3];
-};
 
 }  // namespace
 
-Eigen::MatrixXd ParametricModel::stacked(const RowMatrix& X) const {
+RowMatrix ParametricModel::predict(const RowMatrix& X, const Eigen::VectorXd& theta) const {
+  const Eigen::VectorXd y = stacked(X) * theta;
+  RowMatrix Y(X.rows(), outputs);
+  for (int o = 0; o < outputs; ++o) Y.col(o) = y.segment(o * X.rows(), X.rows());
+  return Y;
+}
+
+Eigen::MatrixXd RowwiseModel::stacked(const RowMatrix& X) const {
   const Eigen::Index N = X.rows();
-  const int O = num_outputs();
-  Eigen::MatrixXd A(N * O, num_params());
+  Eigen::MatrixXd A(N * outputs, num_params());
   for (Eigen::Index i = 0; i < N; ++i) {
-    Eigen::MatrixXd phi = features(X.row(i));
-    for (int o = 0; o < O; ++o) A.row(o * N + i) = phi.row(o);
+    const Eigen::MatrixXd phi = features(X.row(i));
+    for (int o = 0; o < outputs; ++o) A.row(o * N + i) = phi.row(o);
   }
   return A;
 }
 
-Eigen::VectorXd ParametricModel::stacked_targets(const RowMatrix& Y) {
-  Eigen::VectorXd b(Y.size());
-  for (Eigen::Index o = 0; o < Y.cols(); ++o) b.segment(o * Y.rows(), Y.rows()) = Y.col(o);
-  return b;
+int require_column(const Split& s, const std::string& column, const std::string& model) {
+  const int i = s.x_index(column);
+  if (i < 0) throw DatasetError("split '" + s.name + "': model '" + model + "' needs input column '" + column + "'");
+  return i;
 }
 
-RowMatrix ParametricModel::predict(const RowMatrix& X, const Eigen::VectorXd& theta) const {
-  RowMatrix Y(X.rows(), num_outputs());
-  for (Eigen::Index i = 0; i < X.rows(); ++i) Y.row(i) = (features(X.row(i)) * theta).transpose();
-  return Y;
+void require_outputs(const Split& s, const std::vector<std::string>& names, const std::string& model) {
+  if (s.y_columns != names)
+    throw DatasetError("split '" + s.name + "': model '" + model + "' predicts the outputs " + join_list(names) +
+                       " but Y has the columns " + join_list(s.y_columns));
 }
 
-std::unique_ptr<ParametricModel> make_parametric_model(const Dataset& ds, const Split& layout) {
-  const std::string& n = ds.model.name;
-  if (n == "toy") return std::make_unique<ToyModel>(layout);
-  if (n == "via") return std::make_unique<ViaModel>(layout);
-  if (n == "planar_arm3") return std::make_unique<PlanarArm3Model>(layout);
-  throw DatasetError("no parametric model '" + n + "' (known: toy, via, planar_arm3)");
+bool register_parametric_model(const std::string& name, ParametricModelFactory factory) {
+  factories()[name] = std::move(factory);
+  return true;
+}
+
+std::string resolve_mjcf_path(const std::string& stored, const std::string& dataset_file) {
+  const fs::path p(stored);
+  std::vector<fs::path> tries;
+  if (p.is_absolute()) tries.push_back(p);
+  else {
+    if (!dataset_file.empty()) tries.push_back(fs::path(dataset_file).parent_path() / p);
+    tries.push_back(p);
+    tries.push_back(fs::path(spml_share_dir()) / p);
+  }
+  for (const auto& t : tries)
+    if (fs::is_regular_file(t)) return t.string();
+  std::string looked;
+  for (const auto& t : tries) looked += (looked.empty() ? "" : ", ") + t.string();
+  throw DatasetError(dataset_file + ": group 'model': attribute 'mjcf_path' = '" + stored +
+                     "' is not a file (looked at " + looked + "); give the model with --model");
+}
+
+std::unique_ptr<ParametricModel> make_parametric_model(const Dataset& ds, const Split& layout,
+                                                       const std::string& mjcf_override) {
+  std::unique_ptr<ParametricModel> model;
+  const std::string where = ds.source.empty() ? std::string("dataset") : ds.source;
+  try {
+    if (!mjcf_override.empty()) {
+      model = std::make_unique<MjcfModel>(mjcf_override, ds, layout);
+    } else if (auto it = factories().find(ds.model.name); !ds.model.name.empty() && it != factories().end()) {
+      model = it->second(ds, layout);
+    } else if (!ds.model.mjcf_xml.empty()) {
+      // MuJoCo 2.2.2 loads models from files: write the stored text next to nothing else.
+      const fs::path tmp = fs::temp_directory_path() / ("spml-model-" + std::to_string(::getpid()) + ".xml");
+      write_text_atomic(tmp.string(), ds.model.mjcf_xml);
+      try {
+        model = std::make_unique<MjcfModel>(tmp.string(), ds, layout);
+      } catch (...) {
+        fs::remove(tmp);
+        throw;
+      }
+      fs::remove(tmp);
+    } else if (!ds.model.mjcf_path.empty()) {
+      model = std::make_unique<MjcfModel>(resolve_mjcf_path(ds.model.mjcf_path, where), ds, layout);
+    } else if (!ds.model.name.empty()) {
+      std::string known;
+      for (const auto& [n, f] : factories()) known += (known.empty() ? "" : ", ") + n;
+      throw DatasetError("group 'model': no parametric model called '" + ds.model.name + "' (known: " + known +
+                         ") and no mjcf_path/mjcf_xml; give the MJCF with --model");
+    } else {
+      throw DatasetError("no parametric model: the file has no 'model' group; give the robot's MJCF with --model");
+    }
+  } catch (const DatasetError& e) {
+    throw DatasetError(where + ": " + e.what());
+  } catch (const std::runtime_error& e) {
+    throw DatasetError(e.what());
+  }
+  if (model->num_outputs() != layout.Y.cols())
+    throw DatasetError(where + ": split '" + layout.name + "': Y has " + std::to_string(layout.Y.cols()) + " columns (" +
+                       join_list(layout.y_columns) + ") but the parametric model '" + model->name() + "' predicts " +
+                       std::to_string(model->num_outputs()));
+  return model;
 }
 
 }  // namespace spml

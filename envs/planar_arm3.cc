@@ -119,3 +119,47 @@ Eigen::Matrix<double, kParams, 1> coefficients(const mjModel* m) {
 }
 
 }  // namespace spml::planar_arm3
+
+#include "spml/envs/parametric_model.h"
+
+namespace spml {
+namespace {
+// The paper's 17-coefficient regressor of the planar 3-link arm (SimDyn), on the columns
+// q:/qd:/qdd:joint0..2 with outputs tau:joint0..2.
+class PlanarArm3Model : public RowwiseModel {
+ public:
+  explicit PlanarArm3Model(const Split& s) {
+    for (int j = 0; j < 3; ++j) {
+      const std::string joint = "joint" + std::to_string(j);
+      q_[j] = require_column(s, "q:" + joint, "planar_arm3");
+      qd_[j] = require_column(s, "qd:" + joint, "planar_arm3");
+      qdd_[j] = require_column(s, "qdd:" + joint, "planar_arm3");
+    }
+  }
+  std::string name() const override { return "planar_arm3"; }
+  Eigen::MatrixXd features(const Eigen::Ref<const Eigen::RowVectorXd>& x) const override {
+    Eigen::Vector3d q, qd, qdd;
+    for (int j = 0; j < 3; ++j) {
+      q[j] = x[q_[j]];
+      qd[j] = x[qd_[j]];
+      qdd[j] = x[qdd_[j]];
+    }
+    return planar_arm3::regressor(q, qd, qdd);
+  }
+ private:
+  int q_[3], qd_[3], qdd_[3];
+};
+const bool kArmRegistered = register_parametric_model("planar_arm3", [](const Dataset& ds, const Split& s) {
+  require_outputs(s, {"tau:joint0", "tau:joint1", "tau:joint2"}, "planar_arm3");
+  auto m = std::make_unique<PlanarArm3Model>(s);
+  m->param_names = ds.model.param_names;
+  m->prior = ds.model.prior;
+  m->truth = ds.model.truth;
+  if (m->param_names.size() != static_cast<size_t>(planar_arm3::kParams))
+    throw DatasetError("group 'model': 'planar_arm3' has 17 parameters, param_names lists " +
+                       std::to_string(m->param_names.size()));
+  m->outputs = 3;
+  return std::unique_ptr<ParametricModel>(std::move(m));
+});
+}  // namespace
+}  // namespace spml

@@ -3,6 +3,7 @@
 #include <random>
 
 #include "spml/envs/scenarios.h"
+#include "spml/envs/parametric_model.h"
 
 namespace spml {
 namespace {
@@ -57,5 +58,31 @@ Dataset generate_toy(const GenerateOptions& options) {
   ds.provenance["noise_std"] = "0.5";
   return ds;
 }
+
+namespace {
+// The paper's Toy model phi(x) = (sin 2x, x, 1, 0.09 x^2), input column "x", output "y".
+class ToyModel : public RowwiseModel {
+ public:
+  explicit ToyModel(const Split& s) : x_(require_column(s, "x", "toy")) {}
+  std::string name() const override { return "toy"; }
+  Eigen::MatrixXd features(const Eigen::Ref<const Eigen::RowVectorXd>& x) const override {
+    return toy_features(x[x_]).transpose();
+  }
+ private:
+  int x_;
+};
+const bool kToyRegistered = register_parametric_model("toy", [](const Dataset& ds, const Split& s) {
+  require_outputs(s, {"y"}, "toy");
+  auto m = std::make_unique<ToyModel>(s);
+  constexpr int kM = 4;
+  m->param_names = ds.model.param_names;
+  m->prior = ds.model.prior;
+  m->truth = ds.model.truth;
+  if (m->param_names.size() != static_cast<size_t>(kM))
+    throw DatasetError("group 'model': 'toy' has 4 parameters, param_names lists " + std::to_string(m->param_names.size()));
+  m->outputs = 1;
+  return std::unique_ptr<ParametricModel>(std::move(m));
+});
+}  // namespace
 
 }  // namespace spml

@@ -7,6 +7,7 @@
 #include "signals.h"
 #include "spml/envs/mujoco_model.h"
 #include "spml/envs/scenarios.h"
+#include "spml/envs/parametric_model.h"
 #include "spml/force_effects.h"
 
 namespace spml {
@@ -121,5 +122,34 @@ Dataset generate_via(bool autoregressive, const GenerateOptions& options) {
   ds.provenance["sampling"] = "1 kHz telemetry, 10-sample block average to 100 Hz, split at 64 %";
   return ds;
 }
+
+namespace {
+// The paper's VIA model tau = K * deflection + D * deflection_rate.
+class ViaModel : public RowwiseModel {
+ public:
+  explicit ViaModel(const Split& s)
+      : d_(require_column(s, "deflection", "via")), r_(require_column(s, "deflection_rate", "via")) {}
+  std::string name() const override { return "via"; }
+  Eigen::MatrixXd features(const Eigen::Ref<const Eigen::RowVectorXd>& x) const override {
+    Eigen::MatrixXd phi(1, 2);
+    phi << x[d_], x[r_];
+    return phi;
+  }
+ private:
+  int d_, r_;
+};
+const bool kViaRegistered = register_parametric_model("via", [](const Dataset& ds, const Split& s) {
+  if (s.Y.cols() != 1) require_outputs(s, {"tau:link"}, "via");
+  auto m = std::make_unique<ViaModel>(s);
+  constexpr int kM = 2;
+  m->param_names = ds.model.param_names;
+  m->prior = ds.model.prior;
+  m->truth = ds.model.truth;
+  if (m->param_names.size() != static_cast<size_t>(kM))
+    throw DatasetError("group 'model': 'via' has 2 parameters, param_names lists " + std::to_string(m->param_names.size()));
+  m->outputs = 1;
+  return std::unique_ptr<ParametricModel>(std::move(m));
+});
+}  // namespace
 
 }  // namespace spml

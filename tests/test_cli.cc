@@ -149,6 +149,6 @@ TEST(CliIdentify, NamesMissingJointColumn) {
   ASSERT_EQ(run(spml_bin() + " generate -s toy -q -o " + file).exit_code, 0);
   auto r = run(spml_bin() + " identify -m " SPML_SOURCE_DIR "/mjcf/planar_arm3.xml -d " + file);
   EXPECT_EQ(r.exit_code, 1);
-  EXPECT_NE(r.output.find("no column 'q:joint0' for model joint 'joint0'"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("split 'train': no input column 'q:joint0' for model joint 'joint0'"), std::string::npos) << r.output;
   std::filesystem::remove_all(dir);
 }

@@ -169,9 +169,9 @@ TEST(ForcePlugins, BadDeclarationsNameTheElement) {
   const std::string el = "<custom><text name=\"spml.plugin.x\">";
   struct Case { std::string data, message; };
   std::vector<Case> cases = {
-      {"type=no_such_plugin joints=a", "unknown plugin 'no_such_plugin' (available: coulomb, friction_band, offset, ripple, stick_slip, stribeck, viscous"},
+      {"type=no_such_plugin joints=a", "unknown force plugin 'no_such_plugin' (available: coulomb, friction_band, offset, ripple, stick_slip, stribeck, viscous"},
       {"type=coulomb joints=a fc=1 lvl=2", "unknown key 'lvl' for plugin 'coulomb' (accepted: type, joints, fc, smooth)"},
-      {"type=coulomb joints=a fc=abc", "plugin 'coulomb': key 'fc': 'abc' is not a finite number"},
+      {"type=coulomb joints=a fc=abc", "plugin 'coulomb': key 'fc': 'abc' is not a comma-separated list of finite numbers"},
       {"type=coulomb joints=a", "plugin 'coulomb': missing required key 'fc'"},
       {"type=coulomb joints=a,b fc=1,2,3", "key 'fc': expected 1 or 2 values, got 3"},
       {"type=coulomb joints=elbow fc=1", "joint 'elbow' does not exist in the model"},
@@ -191,5 +191,5 @@ TEST(ForcePlugins, AbiMismatchIsRejected) {
   setenv("SPML_PLUGIN_PATH", SPML_TEST_PLUGIN_DIR, 1);
   std::string err = error_of(decl("w", "type=wrong_abi joints=a"));
   unsetenv("SPML_PLUGIN_PATH");
-  EXPECT_NE(err.find("spml_force_wrong_abi.so: force-plugin ABI version 99, this spml speaks version 1"), std::string::npos) << err;
+  EXPECT_NE(err.find("spml_force_wrong_abi.so: force plugin ABI version 99, this spml speaks version 2"), std::string::npos) << err;
 }

@@ -25,7 +25,7 @@ const Dataset& cached(const std::string& name) {
 Eigen::VectorXd lls_rmse(const Dataset& ds, const std::string& split) {
   const Split& tr = ds.get("train");
   auto pm = make_parametric_model(ds, tr);
-  Eigen::VectorXd theta = pm->stacked(tr.X).colPivHouseholderQr().solve(ParametricModel::stacked_targets(tr.Y));
+  Eigen::VectorXd theta = pm->stacked(tr.X).colPivHouseholderQr().solve(stacked_targets(tr.Y));
   const Split& s = ds.get(split);
   RowMatrix P = pm->predict(s.X, theta);
   return ((P - s.Y).colwise().squaredNorm() / static_cast<double>(s.rows())).cwiseSqrt().transpose();

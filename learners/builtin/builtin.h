@@ -11,10 +11,10 @@
 #include <string>
 
 #include "spml/learner.h"
+#include "spml/row_matrix.h"
 
 namespace spml::builtin {
 
-using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 using ConstRowMap = Eigen::Map<const RowMatrix>;
 
 // The ABI's data as Eigen views (phi has 0 columns when the host gave none).
@@ -81,7 +81,7 @@ struct Adapter {
 };
 
 template <class T>
-spml_learner make_learner(const char* name, const char* summary, uint32_t flags, const char* keys) {
+spml_learner make_learner(const char* name, const char* summary, uint32_t flags, const spml_config_key* keys) {
   return spml_learner{SPML_LEARNER_ABI_VERSION, name, summary, flags, keys,
                       &Adapter<T>::fit, &Adapter<T>::predict, &Adapter<T>::notes,
                       &Adapter<T>::coefficients, &Adapter<T>::destroy};

@@ -106,7 +106,11 @@ class GaussianProcess : public Learner {
 };
 
 constexpr uint32_t kGpFlags = SPML_LEARNER_VARIANCE | SPML_LEARNER_DETERMINISTIC;
-constexpr const char* kGpKeys = "max_evals,noise_floor,standardize";
+constexpr spml_config_key kGpKeys[] = {
+    {"max_evals", SPML_VALUE_INTEGER, 1, 1e9, "1000", "most likelihood evaluations of L-BFGS"},
+    {"noise_floor", SPML_VALUE_NUMBER, 1e-300, HUGE_VAL, "1e-6", "lower bound of the noise variance (scaled units)"},
+    {"standardize", SPML_VALUE_INTEGER, 0, 1, "1", "1: fit on targets scaled to unit RMS"},
+    {nullptr, 0, 0, 0, nullptr, nullptr}};
 
 }  // namespace
 

@@ -4,6 +4,7 @@
 #include <vector>
 
 #include "learners.h"
+#include "spml/parse.h"
 
 namespace spml::builtin {
 
@@ -16,11 +17,9 @@ Config::Config(const spml_learner_config* c) {
 double Config::number(const std::string& key, double fallback) const {
   auto it = values.find(key);
   if (it == values.end()) return fallback;
-  char* end = nullptr;
-  const double v = std::strtod(it->second.c_str(), &end);
-  if (it->second.empty() || *end != '\0' || !std::isfinite(v))
-    throw std::runtime_error("config '" + key + "': '" + it->second + "' is not a number");
-  return v;
+  const auto v = parse_number(it->second);
+  if (!v) throw std::runtime_error("config '" + key + "': '" + it->second + "' is not a number");
+  return *v;
 }
 
 void require_model(const View& data, const spml_learner_model& model, const char* learner) {
@@ -44,9 +43,9 @@ const std::vector<spml_learner>& all() {
 
 }  // namespace spml::builtin
 
-extern "C" SPML_LEARNER_EXPORT int32_t spml_learner_abi_version(void) { return SPML_LEARNER_ABI_VERSION; }
+extern "C" SPML_EXPORT int32_t spml_learner_abi_version(void) { return SPML_LEARNER_ABI_VERSION; }
 
-extern "C" SPML_LEARNER_EXPORT const spml_learner* spml_learner_get(int32_t index) {
+extern "C" SPML_EXPORT const spml_learner* spml_learner_get(int32_t index) {
   const auto& list = spml::builtin::all();
   return index >= 0 && static_cast<size_t>(index) < list.size() ? &list[static_cast<size_t>(index)] : nullptr;
 }

@@ -12,19 +12,12 @@
 namespace spml::builtin {
 namespace {
 
-// y stacked output-major, matching phi's row order.
-Eigen::VectorXd stacked_targets(const View& d) {
-  Eigen::VectorXd b(d.Y.size());
-  for (Eigen::Index o = 0; o < d.Y.cols(); ++o) b.segment(o * d.Y.rows(), d.Y.rows()) = d.Y.col(o);
-  return b;
-}
-
 // Least squares on the stacked regressor. The complete orthogonal decomposition gives the
 // minimum-norm solution when the data do not excite every parameter (rank-deficient phi).
 Eigen::VectorXd least_squares(const View& d, Eigen::Index* rank) {
   Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(Eigen::MatrixXd(d.phi));
   *rank = cod.rank();
-  return cod.solve(stacked_targets(d));
+  return cod.solve(stacked_targets(d.Y));
 }
 
 // A linear-in-parameters model with coefficients theta; subclasses decide theta.
@@ -86,7 +79,7 @@ class SupportVectorRegression : public LinearModel {
   void fit(const View& d, const spml_learner_model& model, const Config& config) override {
     require_model(d, model, "SVR");
     const Eigen::Index n = d.phi.rows(), M = d.phi.cols();
-    const Eigen::VectorXd y = stacked_targets(d);
+    const Eigen::VectorXd y = stacked_targets(d.Y);
     Eigen::VectorXd scale(M);
     for (Eigen::Index j = 0; j < M; ++j) {
       const double rms = std::sqrt(d.phi.col(j).squaredNorm() / static_cast<double>(n));
@@ -135,27 +128,32 @@ class SupportVectorRegression : public LinearModel {
   }
 };
 
+constexpr spml_config_key kSvrKeys[] = {
+    {"C", SPML_VALUE_NUMBER, 1e-300, HUGE_VAL, nullptr, "box constraint (default max|mean(y) +- 3 std(y)|)"},
+    {"epsilon", SPML_VALUE_NUMBER, 0, HUGE_VAL, nullptr, "tube width (default 3 sigma sqrt(ln n / n))"},
+    {nullptr, 0, 0, 0, nullptr, nullptr}};
+
 }  // namespace
 
 spml_learner lls_learner() {
   return make_learner<LeastSquares>("LLS", "linear least squares on the stacked model regressor",
-                                    SPML_LEARNER_USES_MODEL | SPML_LEARNER_PARAMETRIC | SPML_LEARNER_DETERMINISTIC, "");
+                                    SPML_LEARNER_USES_MODEL | SPML_LEARNER_PARAMETRIC | SPML_LEARNER_DETERMINISTIC, nullptr);
 }
 spml_learner lls_prior_learner() {
   return make_learner<FixedCoefficients<false>>("LLS-prior", "the model with the dataset's prior coefficients, no fit",
                                                 SPML_LEARNER_USES_MODEL | SPML_LEARNER_DETERMINISTIC |
-                                                    SPML_LEARNER_NEEDS_PRIOR, "");
+                                                    SPML_LEARNER_NEEDS_PRIOR, nullptr);
 }
 spml_learner lls_simulated_learner() {
   return make_learner<FixedCoefficients<true>>("LLS-simulated",
                                                "the model with the simulation's true coefficients, no fit",
                                                SPML_LEARNER_USES_MODEL | SPML_LEARNER_DETERMINISTIC |
-                                                   SPML_LEARNER_NEEDS_TRUTH, "");
+                                                   SPML_LEARNER_NEEDS_TRUTH, nullptr);
 }
 spml_learner svr_learner() {
   return make_learner<SupportVectorRegression>(
       "SVR", "libsvm epsilon-SVR, linear kernel on the model features",
-      SPML_LEARNER_USES_MODEL | SPML_LEARNER_PARAMETRIC | SPML_LEARNER_DETERMINISTIC, "C,epsilon");
+      SPML_LEARNER_USES_MODEL | SPML_LEARNER_PARAMETRIC | SPML_LEARNER_DETERMINISTIC, kSvrKeys);
 }
 
 }  // namespace spml::builtin

@@ -10,99 +10,16 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "spml/csv.h"
 #include "spml/dataset.h"
 #include "spml/learners/learner.h"
+#include "spml/plugin_loader.h"
 
 namespace spml {
 namespace {
 
 namespace fs = std::filesystem;
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-
-std::vector<std::vector<std::string>> read_csv(const std::string& path, std::vector<std::string>* header) {
-  std::ifstream f(path);
-  if (!f) throw LearnerError(path + ": cannot open");
-  std::string line;
-  if (!std::getline(f, line)) throw LearnerError(path + ": empty file");
-  *header = split_list(line);
-  std::vector<std::vector<std::string>> rows;
-  int number = 1;
-  while (std::getline(f, line)) {
-    ++number;
-    if (line.empty()) continue;
-    std::vector<std::string> cells;
-    std::stringstream ss(line);
-    std::string cell;
-    while (std::getline(ss, cell, ',')) cells.push_back(cell);
-    if (!line.empty() && line.back() == ',') cells.push_back("");
-    if (cells.size() < header->size())
-      throw LearnerError(path + ": line " + std::to_string(number) + " has " + std::to_string(cells.size()) +
-                         " cells, the header " + std::to_string(header->size()));
-    rows.push_back(std::move(cells));
-  }
-  return rows;
-}
-
-double number(const std::string& text, const std::string& where, bool allow_missing) {
-  if (text == "inf") return std::numeric_limits<double>::infinity();
-  if (allow_missing && (text == "-" || text.empty())) return kNaN;
-  try {
-    size_t used = 0;
-    const double v = std::stod(text, &used);
-    if (used != text.size() || std::isnan(v)) throw std::invalid_argument("junk");
-    return v;
-  } catch (const std::exception&) {
-    throw LearnerError(where + ": '" + text + "' is not a number");
-  }
-}
-
-std::vector<ResultRow> parse_rows(const std::string& path, bool published) {
-  std::vector<std::string> header;
-  const auto rows = read_csv(path, &header);
-  auto column = [&](std::initializer_list<const char*> names) {
-    for (const char* n : names)
-      for (size_t i = 0; i < header.size(); ++i)
-        if (header[i] == n) return static_cast<int>(i);
-    return -1;
-  };
-  auto required = [&](std::initializer_list<const char*> names) {
-    const int c = column(names);
-    if (c < 0) throw LearnerError(path + ": column '" + *names.begin() + "' is missing");
-    return c;
-  };
-  const int algo = required({"algo"});
-  const int cols[8] = {required({"rmsemean"}), required({"rmsestd"}), required({"rmsemin", "rmseamin"}),
-                       required({"rmsemax", "rmseamax"}), required({"nllhmean"}), required({"nllhstd"}),
-                       required({"nllhmin", "nllhamin"}), required({"nllhmax", "nllhamax"})};
-  int scenario = -1, split = -1, output = -1, warnings = -1;
-  if (!published) {
-    scenario = required({"scenario"});
-    split = required({"split"});
-    output = required({"output"});
-    warnings = column({"warnings"});
-  }
-  std::vector<ResultRow> out;
-  int line = 1;
-  for (const auto& r : rows) {
-    ++line;
-    ResultRow row;
-    row.algo = canonical_algo(r[static_cast<size_t>(algo)]);
-    double* fields[8] = {&row.rmse_mean, &row.rmse_std, &row.rmse_min, &row.rmse_max,
-                         &row.nllh_mean, &row.nllh_std, &row.nllh_min, &row.nllh_max};
-    for (int k = 0; k < 8; ++k)
-      *fields[k] = number(r[static_cast<size_t>(cols[k])],
-                          path + ": line " + std::to_string(line) + " column '" + header[static_cast<size_t>(cols[k])] + "'",
-                          published);
-    if (!published) {
-      row.scenario = r[static_cast<size_t>(scenario)];
-      row.split = r[static_cast<size_t>(split)];
-      row.output = static_cast<int>(number(r[static_cast<size_t>(output)], path + ": line " + std::to_string(line) + " column 'output'", false));
-      if (warnings >= 0 && static_cast<size_t>(warnings) < r.size()) row.warnings = r[static_cast<size_t>(warnings)];
-    }
-    out.push_back(std::move(row));
-  }
-  return out;
-}
 
 std::vector<double> ranks(const std::vector<double>& v) {
   std::vector<size_t> idx(v.size());
@@ -135,15 +52,7 @@ std::string delta(double ours, double paper) {
 
 }  // namespace
 
-std::string canonical_algo(const std::string& name) {
-  if (name == "SPGP-from-zeroes") return "SPGP-from-zeros";
-  return name;
-}
-
-std::vector<ResultRow> read_results(const std::string& path) { return parse_rows(path, false); }
-std::vector<ResultRow> read_published_table(const std::string& path) { return parse_rows(path, true); }
-
-std::string default_published_dir() { return SPML_PUBLISHED_DIR; }
+std::string default_published_dir() { return (fs::path(spml_share_dir()) / "published").string(); }
 
 double spearman_rho(const std::vector<double>& a, const std::vector<double>& b) {
   const std::vector<double> ra = ranks(a), rb = ranks(b);
@@ -174,9 +83,9 @@ std::string compare_report(const std::vector<ResultRow>& results, const std::str
   // Which paper table belongs to which of our groups.
   std::map<std::string, std::string> table_of;
   {
-    std::vector<std::string> header;
-    const std::string index = (fs::path(published_dir) / "tables.csv").string();
-    for (const auto& r : read_csv(index, &header)) table_of[r[0] + "|" + r[1] + "|" + r[2]] = r[3];
+    const CsvText index = read_csv((fs::path(published_dir) / "tables.csv").string());
+    if (index.header.size() < 4) throw DatasetError(index.source + ": expected columns scenario,split,output,table");
+    for (const auto& r : index.rows) table_of[r[0] + "|" + r[1] + "|" + r[2]] = r[3];
   }
   std::vector<std::string> order;
   std::map<std::string, std::vector<const ResultRow*>> groups;

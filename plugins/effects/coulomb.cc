@@ -6,7 +6,10 @@ namespace spml::effects {
 struct Coulomb {
   static constexpr const char* kName = "coulomb";
   static constexpr const char* kDescription = "Coulomb friction -fc*sign(qd) per joint; linear in fc";
-  static constexpr const char* kKeys[] = {"fc", "smooth", nullptr};
+  static constexpr spml_config_key kKeys[] = {
+      {"fc", SPML_VALUE_NUMBERS, -HUGE_VAL, HUGE_VAL, nullptr, "Coulomb force per joint"},
+      {"smooth", SPML_VALUE_NUMBER, 0, HUGE_VAL, "0", "tanh width in velocity units (0: exact sign)"},
+      {nullptr, 0, 0, 0, nullptr, nullptr}};
   static constexpr bool kLinear = true;
 
   explicit Coulomb(const EffectConfig& c) : joints(c.joints), smooth(c.number("smooth", 0.0)) {

@@ -3,16 +3,20 @@
 // plugin source holds only its physics.
 //
 // An effect class provides:
-//   static const char* const kName, kDescription; static const char* const kKeys[] (NULL-ended)
+//   static const char* const kName, kDescription; static constexpr spml_config_key kKeys[] ({NULL}-ended)
 //   explicit Effect(const EffectConfig&)            (throws std::invalid_argument on bad values)
 //   void compute(const mjModel*, const mjData*, mjtNum* qfrc) const
 //   std::vector<std::string> names; std::vector<double> theta;   (the parameter vector)
 // and optionally
 //   static constexpr bool kLinear = true; void regressor(const mjModel*, const mjtNum* qpos, const mjtNum* qvel, mjtNum* R) const
 //   static constexpr bool kStateful = true; void advance(const mjModel*, const mjData*, mjtNum dt); void reset()
+//   static constexpr spml_shape_param kShape[] ({NULL}-ended)
+// The host has already checked every value against kKeys and filled in the defaults, so an
+// effect only checks relations between values (lower < upper, fc <= fs).
 #pragma once
 
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <stdexcept>
@@ -20,6 +24,7 @@
 #include <vector>
 
 #include "spml/force_plugin.h"
+#include "spml/parse.h"
 
 namespace spml::effects {
 
@@ -51,19 +56,9 @@ class EffectConfig {
   std::vector<double> list(const std::string& key, size_t expect = 0) const {
     const std::string* text = find(key);
     if (!text) throw std::invalid_argument("missing required key '" + key + "'");
-    std::vector<double> out;
-    size_t pos = 0;
-    while (pos <= text->size()) {
-      size_t comma = text->find(',', pos);
-      std::string item = text->substr(pos, comma == std::string::npos ? std::string::npos : comma - pos);
-      char* end = nullptr;
-      double v = std::strtod(item.c_str(), &end);
-      if (item.empty() || *end != '\0' || !std::isfinite(v))
-        throw std::invalid_argument("key '" + key + "': '" + item + "' is not a finite number");
-      out.push_back(v);
-      if (comma == std::string::npos) break;
-      pos = comma + 1;
-    }
+    const auto parsed = parse_numbers(*text);
+    if (!parsed) throw std::invalid_argument("key '" + key + "': '" + *text + "' is not a list of finite numbers");
+    std::vector<double> out = *parsed;
     if (expect && out.size() == 1) out.assign(expect, out[0]);
     if (expect && out.size() != expect)
       throw std::invalid_argument("key '" + key + "': expected 1 or " + std::to_string(expect) + " values, got " +
@@ -97,23 +92,25 @@ inline double smooth_sign(double v, double width) {
 
 template <class E, class = void> struct is_linear : std::false_type {};
 template <class E> struct is_linear<E, std::void_t<decltype(E::kLinear)>> : std::bool_constant<E::kLinear> {};
+template <class E, class = void> struct has_shape : std::false_type {};
+template <class E> struct has_shape<E, std::void_t<decltype(E::kShape)>> : std::true_type {};
 template <class E, class = void> struct is_stateful : std::false_type {};
 template <class E> struct is_stateful<E, std::void_t<decltype(E::kStateful)>> : std::bool_constant<E::kStateful> {};
 
 template <class E>
-const spmlForcePlugin* make_descriptor() {
-  static const spmlForcePlugin d = [] {
-    spmlForcePlugin p{};
-    p.abi_version = SPML_FORCE_PLUGIN_ABI;
+const spml_force_plugin* make_descriptor() {
+  static const spml_force_plugin d = [] {
+    spml_force_plugin p{};
+    p.abi_version = SPML_FORCE_PLUGIN_ABI_VERSION;
     p.name = E::kName;
-    p.description = E::kDescription;
-    p.keys = E::kKeys;
-    p.create = [](const mjModel* m, const int* joints, int njoint, const char* const* keys,
-                  const char* const* values, int nkv, char* err, int errlen) -> void* {
+    p.summary = E::kDescription;
+    p.config_keys = E::kKeys;
+    p.create = [](const mjModel* m, const int* joints, int32_t njoint, const char* const* keys,
+                  const char* const* values, int32_t nkv, char* err, size_t errlen) -> void* {
       try {
         return new E(EffectConfig(m, joints, njoint, keys, values, nkv));
       } catch (const std::exception& e) {
-        std::snprintf(err, static_cast<size_t>(errlen), "%s", e.what());
+        std::snprintf(err, errlen, "%s", e.what());
         return nullptr;
       }
     };
@@ -125,8 +122,8 @@ const spmlForcePlugin* make_descriptor() {
       p.advance = [](void* inst, const mjModel* m, const mjData* d, mjtNum dt) { static_cast<E*>(inst)->advance(m, d, dt); };
       p.reset = [](void* inst) { static_cast<E*>(inst)->reset(); };
     }
-    p.nparam = [](const void* inst) { return static_cast<int>(static_cast<const E*>(inst)->theta.size()); };
-    p.param_name = [](const void* inst, int i) { return static_cast<const E*>(inst)->names.at(i).c_str(); };
+    p.nparam = [](const void* inst) { return static_cast<int32_t>(static_cast<const E*>(inst)->theta.size()); };
+    p.param_name = [](const void* inst, int32_t i) { return static_cast<const E*>(inst)->names.at(i).c_str(); };
     p.get_params = [](const void* inst, mjtNum* out) {
       auto& th = static_cast<const E*>(inst)->theta;
       for (size_t i = 0; i < th.size(); ++i) out[i] = th[i];
@@ -140,16 +137,19 @@ const spmlForcePlugin* make_descriptor() {
         static_cast<const E*>(inst)->regressor(m, qpos, qvel, R);
       };
     }
+    if constexpr (has_shape<E>::value) p.shape_params = E::kShape;
     return p;
   }();
   return &d;
 }
 
 // Linear effects compute their force as R * theta, so force and regressor cannot disagree.
+// The scratch buffer is per thread and only grows: no heap allocation per simulation step.
 template <class E>
 void compute_linear(const E& e, const mjModel* m, const mjData* d, mjtNum* qfrc) {
   const int np = static_cast<int>(e.theta.size());
-  std::vector<mjtNum> R(static_cast<size_t>(m->nv) * np, 0.0);
+  thread_local std::vector<mjtNum> R;
+  R.assign(static_cast<size_t>(m->nv) * np, 0.0);
   e.regressor(m, d->qpos, d->qvel, R.data());
   for (int r = 0; r < m->nv; ++r)
     for (int c = 0; c < np; ++c) qfrc[r] += R[static_cast<size_t>(r) * np + c] * e.theta[c];
@@ -157,7 +157,9 @@ void compute_linear(const E& e, const mjModel* m, const mjData* d, mjtNum* qfrc)
 
 }  // namespace spml::effects
 
-#define SPML_EXPORT_FORCE_PLUGIN(Effect)                                             \
-  extern "C" __attribute__((visibility("default"))) const spmlForcePlugin* spml_force_plugin(void) { \
-    return spml::effects::make_descriptor<Effect>();                                 \
+// One effect per library: the two entry points of force_plugin.h.
+#define SPML_EXPORT_FORCE_PLUGIN(Effect)                                                              \
+  extern "C" SPML_EXPORT int32_t spml_force_plugin_abi_version(void) { return SPML_FORCE_PLUGIN_ABI_VERSION; } \
+  extern "C" SPML_EXPORT const spml_force_plugin* spml_force_plugin_get(int32_t i) {                   \
+    return i == 0 ? spml::effects::make_descriptor<Effect>() : nullptr;                               \
   }

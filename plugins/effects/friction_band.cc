@@ -8,7 +8,14 @@ namespace spml::effects {
 struct FrictionBand {
   static constexpr const char* kName = "friction_band";
   static constexpr const char* kDescription = "dry friction of size level inside lower <= q <= upper; linear in level";
-  static constexpr const char* kKeys[] = {"lower", "upper", "level", "smooth", nullptr};
+  static constexpr spml_config_key kKeys[] = {
+      {"lower", SPML_VALUE_NUMBER, -HUGE_VAL, HUGE_VAL, nullptr, "lower edge of the band (joint position)"},
+      {"upper", SPML_VALUE_NUMBER, -HUGE_VAL, HUGE_VAL, nullptr, "upper edge of the band (joint position)"},
+      {"level", SPML_VALUE_NUMBERS, -HUGE_VAL, HUGE_VAL, nullptr, "friction level inside the band, per joint"},
+      {"smooth", SPML_VALUE_NUMBER, 0, HUGE_VAL, "0", "tanh width in velocity units (0: exact sign)"},
+      {nullptr, 0, 0, 0, nullptr, nullptr}};
+  static constexpr spml_shape_param kShape[] = {
+      {"lower", SPML_SHAPE_POSITION, 0.0, 1.0, 0, 0}, {"upper", SPML_SHAPE_POSITION, 0.0, 1.0, 0, 0}, {nullptr, 0, 0, 0, 0, 0}};
   static constexpr bool kLinear = true;
 
   explicit FrictionBand(const EffectConfig& c)

@@ -6,7 +6,9 @@ namespace spml::effects {
 struct Offset {
   static constexpr const char* kName = "offset";
   static constexpr const char* kDescription = "constant force/torque c per joint; linear in c";
-  static constexpr const char* kKeys[] = {"c", nullptr};
+  static constexpr spml_config_key kKeys[] = {
+      {"c", SPML_VALUE_NUMBERS, -HUGE_VAL, HUGE_VAL, nullptr, "constant force per joint"},
+      {nullptr, 0, 0, 0, nullptr, nullptr}};
   static constexpr bool kLinear = true;
 
   explicit Offset(const EffectConfig& c) : joints(c.joints) {

@@ -9,7 +9,13 @@ namespace spml::effects {
 struct Ripple {
   static constexpr const char* kName = "ripple";
   static constexpr const char* kDescription = "harmonic-drive ripple sum a*sin(h*gear*q+phase); linear in the sin/cos amplitudes";
-  static constexpr const char* kKeys[] = {"gear", "harmonics", "amplitudes", "phases", nullptr};
+  static constexpr spml_config_key kKeys[] = {
+      {"gear", SPML_VALUE_NUMBER, 1e-12, HUGE_VAL, nullptr, "ripple periods per radian (gear ratio)"},
+      {"harmonics", SPML_VALUE_NUMBERS, 1, 1000, nullptr, "harmonic orders, e.g. 1,2"},
+      {"amplitudes", SPML_VALUE_NUMBERS, -HUGE_VAL, HUGE_VAL, nullptr, "amplitude per harmonic"},
+      {"phases", SPML_VALUE_NUMBERS, -HUGE_VAL, HUGE_VAL, "0", "phase per harmonic [rad]"},
+      {nullptr, 0, 0, 0, nullptr, nullptr}};
+  static constexpr spml_shape_param kShape[] = {{"gear", SPML_SHAPE_ABSOLUTE, 1, 200, 0, 1}, {nullptr, 0, 0, 0, 0, 0}};
   static constexpr bool kLinear = true;
 
   explicit Ripple(const EffectConfig& c) : joints(c.joints), gear(c.number("gear")), harmonics(c.list("harmonics")) {

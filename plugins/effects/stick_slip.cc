@@ -11,7 +11,14 @@ namespace spml::effects {
 struct StickSlip {
   static constexpr const char* kName = "stick_slip";
   static constexpr const char* kDescription = "LuGre stick-slip friction with break-away force fs (stateful, nonlinear)";
-  static constexpr const char* kKeys[] = {"fc", "fs", "vs", "sigma0", "sigma1", "sigma2", nullptr};
+  static constexpr spml_config_key kKeys[] = {
+      {"fc", SPML_VALUE_NUMBERS, 0, HUGE_VAL, nullptr, "Coulomb level"},
+      {"fs", SPML_VALUE_NUMBERS, 0, HUGE_VAL, nullptr, "break-away force"},
+      {"vs", SPML_VALUE_NUMBERS, 0, HUGE_VAL, nullptr, "Stribeck velocity"},
+      {"sigma0", SPML_VALUE_NUMBERS, 0, HUGE_VAL, nullptr, "bristle stiffness"},
+      {"sigma1", SPML_VALUE_NUMBERS, 0, HUGE_VAL, nullptr, "bristle damping"},
+      {"sigma2", SPML_VALUE_NUMBERS, 0, HUGE_VAL, nullptr, "viscous coefficient"},
+      {nullptr, 0, 0, 0, nullptr, nullptr}};
   static constexpr bool kStateful = true;
 
   explicit StickSlip(const EffectConfig& c) : joints(c.joints), z(c.joints.size(), 0.0) {

@@ -7,7 +7,13 @@ namespace spml::effects {
 struct Stribeck {
   static constexpr const char* kName = "stribeck";
   static constexpr const char* kDescription = "Stribeck friction, static fs decaying to Coulomb fc over vs; linear in fc, fs";
-  static constexpr const char* kKeys[] = {"fc", "fs", "vs", "smooth", nullptr};
+  static constexpr spml_config_key kKeys[] = {
+      {"fc", SPML_VALUE_NUMBERS, -HUGE_VAL, HUGE_VAL, nullptr, "Coulomb level per joint"},
+      {"fs", SPML_VALUE_NUMBERS, -HUGE_VAL, HUGE_VAL, nullptr, "static (break-away) level per joint"},
+      {"vs", SPML_VALUE_NUMBERS, 1e-12, HUGE_VAL, nullptr, "Stribeck velocity per joint"},
+      {"smooth", SPML_VALUE_NUMBER, 0, HUGE_VAL, "0", "tanh width in velocity units (0: exact sign)"},
+      {nullptr, 0, 0, 0, nullptr, nullptr}};
+  static constexpr spml_shape_param kShape[] = {{"vs", SPML_SHAPE_SPEED, 0.005, 0.5, 1, 0}, {nullptr, 0, 0, 0, 0, 0}};
   static constexpr bool kLinear = true;
 
   explicit Stribeck(const EffectConfig& c) : joints(c.joints), vs(c.per_joint("vs")), smooth(c.number("smooth", 0.0)) {

@@ -6,7 +6,9 @@ namespace spml::effects {
 struct Viscous {
   static constexpr const char* kName = "viscous";
   static constexpr const char* kDescription = "viscous friction -fv*qd per joint; linear in fv";
-  static constexpr const char* kKeys[] = {"fv", nullptr};
+  static constexpr spml_config_key kKeys[] = {
+      {"fv", SPML_VALUE_NUMBERS, -HUGE_VAL, HUGE_VAL, nullptr, "viscous coefficient per joint"},
+      {nullptr, 0, 0, 0, nullptr, nullptr}};
   static constexpr bool kLinear = true;
 
   explicit Viscous(const EffectConfig& c) : joints(c.joints) {

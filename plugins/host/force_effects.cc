@@ -1,41 +1,51 @@
 #include "spml/force_effects.h"
 
-#include <dlfcn.h>
 
 #include <cstdlib>
-#include <filesystem>
+#include <algorithm>
+#include <atomic>
+#include <cmath>
 #include <map>
 #include <mutex>
 #include <set>
 #include <sstream>
 
-#ifndef SPML_FORCE_PLUGIN_BUILD_DIR
-#define SPML_FORCE_PLUGIN_BUILD_DIR ""
-#endif
-#ifndef SPML_FORCE_PLUGIN_INSTALL_DIR
-#define SPML_FORCE_PLUGIN_INSTALL_DIR ""
-#endif
 
 namespace spml {
 namespace {
 
-namespace fs = std::filesystem;
 constexpr const char* kPrefix = "spml.plugin.";
 
 std::string element_of(const std::string& name) { return "<custom><text name=\"" + name + "\">"; }
 
 // ---- the process-wide passive callback, dispatching per model ----
-std::mutex g_registry_mutex;
-std::map<const mjModel*, const ForceEffects*> g_registry;
+// mjcb_passive runs in every step, so its look-up takes no lock: a fixed table of
+// (model, effects) slots written under a mutex (attach/detach are rare) and read with atomics.
+constexpr int kSlots = 256;
+std::atomic<const mjModel*> g_models[kSlots];
+std::atomic<const ForceEffects*> g_effects[kSlots];
+std::mutex g_write_mutex;
 
 void passive_dispatch(const mjModel* m, mjData* d) {
-  const ForceEffects* fx = nullptr;
-  {
-    std::lock_guard<std::mutex> lock(g_registry_mutex);
-    auto it = g_registry.find(m);
-    if (it != g_registry.end()) fx = it->second;
+  for (int i = 0; i < kSlots; ++i)
+    if (g_models[i].load(std::memory_order_acquire) == m) {
+      if (const ForceEffects* fx = g_effects[i].load(std::memory_order_acquire)) fx->compute(d, d->qfrc_passive);
+      return;
+    }
+}
+
+std::string check_force_plugin(const void* entry) {
+  const auto* p = static_cast<const spml_force_plugin*>(entry);
+  if (!p->create || !p->destroy || !p->compute || !p->nparam || !p->param_name || !p->get_params || !p->set_params)
+    return "descriptor lacks a required callback (create, destroy, compute, nparam, param_name, get_params, set_params)";
+  for (const spml_shape_param* sp = p->shape_params; sp && sp->key; ++sp) {
+    const std::string k = sp->key;
+    if (!find_config_key(p->config_keys, k)) return "shape parameter '" + k + "' is not one of its config keys";
+    if (!(sp->lo < sp->hi) || !std::isfinite(sp->lo) || !std::isfinite(sp->hi) || (sp->log_scale && sp->lo <= 0) ||
+        sp->domain < SPML_SHAPE_ABSOLUTE || sp->domain > SPML_SHAPE_SPEED)
+      return "shape parameter '" + k + "' has an invalid search description (need finite lo < hi, lo > 0 on a log scale, a known domain)";
   }
-  if (fx) fx->compute(d, d->qfrc_passive);
+  return "";
 }
 
 }  // namespace
@@ -78,82 +88,62 @@ std::vector<PluginDeclaration> parse_plugin_declarations(const mjModel* m, const
   return out;
 }
 
-std::vector<std::string> plugin_search_path() {
-  std::vector<std::string> dirs;
-  if (const char* env = std::getenv("SPML_PLUGIN_PATH")) {
-    std::stringstream ss(env);
-    std::string d;
-    while (std::getline(ss, d, ':'))
-      if (!d.empty()) dirs.push_back(d);
-  }
-  for (const char* d : {SPML_FORCE_PLUGIN_BUILD_DIR, SPML_FORCE_PLUGIN_INSTALL_DIR})
-    if (*d) dirs.push_back(d);
-  return dirs;
+PluginCatalog& force_plugins() {
+  static PluginCatalog catalog = [] {
+    PluginCatalog c({"force plugin", "spml_force_plugin", SPML_FORCE_PLUGIN_ABI_VERSION, "SPML_PLUGIN_PATH", "plugins"},
+                    &check_force_plugin);
+    c.add_default_path();
+    return c;
+  }();
+  return catalog;
 }
 
 std::vector<std::string> available_force_plugins() {
-  std::set<std::string> names;
-  for (const auto& dir : plugin_search_path()) {
-    std::error_code ec;
-    for (const auto& entry : fs::directory_iterator(dir, ec)) {
-      std::string f = entry.path().filename().string();
-      if (f.rfind("spml_force_", 0) == 0 && entry.path().extension() == ".so")
-        names.insert(f.substr(11, f.size() - 11 - 3));
-    }
-  }
-  return {names.begin(), names.end()};
+  std::vector<std::string> names = force_plugins().names();
+  std::sort(names.begin(), names.end());
+  return names;
 }
 
-const spmlForcePlugin& load_force_plugin(const std::string& type, const std::string& element) {
-  static std::mutex mutex;
-  static std::map<std::string, const spmlForcePlugin*> cache;
-  std::lock_guard<std::mutex> lock(mutex);
-  if (auto it = cache.find(type); it != cache.end()) return *it->second;
-  const std::string where = element.empty() ? "" : element + ": ";
-  for (const auto& dir : plugin_search_path()) {
-    fs::path file = fs::path(dir) / ("spml_force_" + type + ".so");
-    if (!fs::exists(file)) continue;
-    void* handle = dlopen(file.c_str(), RTLD_NOW | RTLD_LOCAL);
-    if (!handle) throw PluginError(where + file.string() + ": cannot be loaded: " + dlerror());
-    auto entry = reinterpret_cast<spmlForcePluginEntry>(dlsym(handle, SPML_FORCE_PLUGIN_ENTRY));
-    if (!entry) throw PluginError(where + file.string() + ": missing symbol '" + SPML_FORCE_PLUGIN_ENTRY + "'");
-    const spmlForcePlugin* p = entry();
-    if (!p || p->abi_version != SPML_FORCE_PLUGIN_ABI)
-      throw PluginError(where + file.string() + ": force-plugin ABI version " + std::to_string(p ? p->abi_version : -1) +
-                        ", this spml speaks version " + std::to_string(SPML_FORCE_PLUGIN_ABI));
-    if (!p->create || !p->destroy || !p->compute || !p->nparam || !p->param_name || !p->get_params || !p->set_params)
-      throw PluginError(where + file.string() + ": descriptor lacks a required callback");
-    cache[type] = p;
-    return *p;
-  }
-  std::string known;
-  for (const auto& n : available_force_plugins()) known += (known.empty() ? "" : ", ") + n;
-  throw PluginError(where + "unknown plugin '" + type + "' (available: " + (known.empty() ? "none found" : known) +
-                    "; search path: $SPML_PLUGIN_PATH, " + SPML_FORCE_PLUGIN_BUILD_DIR + ")");
+const spml_force_plugin& load_force_plugin(const std::string& type, const std::string& element) {
+  const PluginCatalog& catalog = force_plugins();
+  if (const void* p = catalog.find(type)) return *static_cast<const spml_force_plugin*>(p);
+  throw PluginError((element.empty() ? "" : element + ": ") + catalog.unknown(type));
 }
 
 ForceEffects::ForceEffects(const mjModel* m, const std::string& source) : m_(m) {
   for (auto& decl : parse_plugin_declarations(m, source)) {
     const std::string where = source + ": " + decl.element;
-    const spmlForcePlugin& p = load_force_plugin(decl.type, where);
-    std::set<std::string> accepted;
-    for (const char* const* k = p.keys; k && *k; ++k) accepted.insert(*k);
-    std::vector<const char*> keys, values;
+    const spml_force_plugin& p = load_force_plugin(decl.type, where);
+    const std::string plugin = "plugin '" + decl.type + "'";
+    // Check every value against the plugin's key table, then fill in the defaults.
+    std::vector<std::pair<std::string, std::string>> config;
     for (auto& [k, v] : decl.config) {
-      if (!accepted.count(k)) {
-        std::string list;
-        for (auto& a : accepted) list += (list.empty() ? "" : ", ") + a;
-        throw PluginError(where + ": unknown key '" + k + "' for plugin '" + decl.type + "' (accepted: type, joints, " + list + ")");
-      }
+      const spml_config_key* key = find_config_key(p.config_keys, k);
+      if (!key)
+        throw PluginError(where + ": unknown key '" + k + "' for " + plugin + " (accepted: type, joints, " +
+                          config_key_list(p.config_keys) + ")");
+      if (std::string why = check_config_value(*key, v); !why.empty())
+        throw PluginError(where + ": " + plugin + ": key '" + k + "': " + why);
+      config.emplace_back(k, v);
+    }
+    for (const spml_config_key* key = p.config_keys; key && key->name; ++key) {
+      bool given = false;
+      for (auto& kv : decl.config) given |= kv.first == key->name;
+      if (given) continue;
+      if (!key->default_value) throw PluginError(where + ": " + plugin + ": missing required key '" + key->name + "'");
+      config.emplace_back(key->name, key->default_value);
+    }
+    std::vector<const char*> keys, values;
+    for (auto& [k, v] : config) {
       keys.push_back(k.c_str());
       values.push_back(v.c_str());
     }
     std::vector<int> joints;
     for (auto& j : decl.joints) joints.push_back(mj_name2id(m, mjOBJ_JOINT, j.c_str()));
     char err[512] = {0};
-    void* state = p.create(m, joints.data(), static_cast<int>(joints.size()), keys.data(), values.data(),
-                           static_cast<int>(keys.size()), err, sizeof err);
-    if (!state) throw PluginError(where + ": plugin '" + decl.type + "': " + err);
+    void* state = p.create(m, joints.data(), static_cast<int32_t>(joints.size()), keys.data(), values.data(),
+                           static_cast<int32_t>(keys.size()), err, sizeof err);
+    if (!state) throw PluginError(where + ": " + plugin + ": " + (err[0] ? err : "create failed"));
     int np = p.nparam(state);
     instances_.push_back({std::move(decl), &p, state, nparam_, np});
     nparam_ += np;
@@ -166,23 +156,38 @@ ForceEffects::~ForceEffects() {
 }
 
 void ForceEffects::attach() {
-  std::lock_guard<std::mutex> lock(g_registry_mutex);
-  auto it = g_registry.find(m_);
-  if (it != g_registry.end() && it->second != this)
-    throw PluginError("another set of force plugins is already attached to this mjModel");
-  g_registry[m_] = this;
+  std::lock_guard<std::mutex> lock(g_write_mutex);
   // Another library may own mjcb_passive; refuse rather than silently replace it.
   if (mjcb_passive && mjcb_passive != passive_dispatch)
     throw PluginError("mjcb_passive is already set by someone else; spml cannot dispatch force plugins");
+  int free_slot = -1;
+  for (int i = 0; i < kSlots; ++i) {
+    if (g_models[i].load() == m_) {
+      if (g_effects[i].load() != this) throw PluginError("another set of force plugins is already attached to this mjModel");
+      attached_ = true;
+      return;
+    }
+    if (free_slot < 0 && g_models[i].load() == nullptr) free_slot = i;
+  }
+  if (free_slot < 0) throw PluginError("more than " + std::to_string(kSlots) + " models with force plugins attached at once");
+  g_effects[free_slot].store(this, std::memory_order_release);
+  g_models[free_slot].store(m_, std::memory_order_release);
   mjcb_passive = passive_dispatch;
   attached_ = true;
 }
 
 void ForceEffects::detach() {
   if (!attached_) return;
-  std::lock_guard<std::mutex> lock(g_registry_mutex);
-  g_registry.erase(m_);
-  if (g_registry.empty() && mjcb_passive == passive_dispatch) mjcb_passive = nullptr;
+  std::lock_guard<std::mutex> lock(g_write_mutex);
+  bool any = false;
+  for (int i = 0; i < kSlots; ++i) {
+    if (g_models[i].load() == m_ && g_effects[i].load() == this) {
+      g_models[i].store(nullptr, std::memory_order_release);
+      g_effects[i].store(nullptr, std::memory_order_release);
+    }
+    any |= g_models[i].load() != nullptr;
+  }
+  if (!any && mjcb_passive == passive_dispatch) mjcb_passive = nullptr;
   attached_ = false;
 }
 

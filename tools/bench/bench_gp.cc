@@ -54,9 +54,9 @@ int main(int argc, char** argv) {
       registry.add_default_path();
       auto learner = registry.create("SPGP");
       auto model = spml::make_parametric_model(ds, train);
-      spml::LearnerMatrix X = train.X, Y = train.Y, phi = model->stacked(train.X);
+      spml::RowMatrix X = train.X, Y = train.Y, phi = model->stacked(train.X);
       spml::LearnerData d{&X, &Y, &phi, static_cast<int>(Y.cols())};
-      spml::LearnerModel m{ds.model.param_names, ds.model.prior, ds.model.truth};
+      spml::LearnerModel m{model->param_names, model->prior, model->truth};
       const auto t0 = std::chrono::steady_clock::now();
       learner->fit(d, m, spml::LearnerConfig{});
       out["spgp_fit_rows"] = train.rows();

@@ -5,6 +5,7 @@
 #include "commands.h"
 #include "spml/learners/compare.h"
 #include "spml/learners/evaluate.h"
+#include "spml/force_effects.h"
 
 namespace spml::cli {
 namespace {
@@ -12,6 +13,7 @@ namespace {
 void load_learners(LearnerRegistry& registry, const std::vector<std::string>& extra) {
   registry.add_default_path();
   for (const auto& p : extra) registry.add(p);
+  for (const auto& w : registry.warnings()) std::cerr << "spml: warning: " << w << "\n";
 }
 
 const char* kPathHelp = "Extra learner library or folder (also $SPML_LEARNER_PATH, ':'-separated)";
@@ -24,38 +26,44 @@ void add_bench(CLI::App& app) {
   auto learners = std::make_shared<std::string>("all");
   auto out = std::make_shared<std::string>();
   auto reps = std::make_shared<int>(5);
-  auto seed = std::make_shared<std::uint64_t>(1);
+  auto seed = std::make_shared<std::string>("1");
   auto paths = std::make_shared<std::vector<std::string>>();
+  auto plugin_paths = std::make_shared<std::vector<std::string>>();
   auto sets = std::make_shared<std::vector<std::string>>();
-  auto train_max = std::make_shared<long>(0);
-  auto test_max = std::make_shared<long>(5000);
-  cmd->add_option("--data", *data, "spml/1 dataset")->required()->check(CLI::ExistingFile);
+  auto train_max = std::make_shared<std::string>("all");
+  auto test_max = std::make_shared<std::string>("5000");
+  auto model = std::make_shared<std::string>();
+  cmd->add_option("--data", *data, "spml/1 dataset")->required();
+  cmd->add_option("--model", *model, "MJCF whose regressor is the parametric model (default: the dataset's own)");
+  cmd->add_option("--plugin-path", *plugin_paths, "Extra force-plugin library or folder (also $SPML_PLUGIN_PATH)");
   cmd->add_option("--learners", *learners, "Comma-separated learner names, or 'all'")->capture_default_str();
   cmd->add_option("--out", *out, "Output folder (results.csv, predictions.h5, units/)")->required();
-  cmd->add_option("--reps", *reps, "Repetitions with seeds seed..seed+reps-1")->capture_default_str();
+  cmd->add_option("--reps", *reps, "Repetitions with seeds seed..seed+reps-1")->capture_default_str()->check(CLI::Range(1, 1000));
   cmd->add_option("--seed", *seed, "Seed of the first repetition")->capture_default_str();
   cmd->add_option("--learner-path", *paths, kPathHelp);
   cmd->add_option("--set", *sets, "key=value for every learner that accepts the key (e.g. max_evals=200)");
-  cmd->add_option("--train-max", *train_max, "Use at most this many training rows, evenly strided (0 = all)")
+  cmd->add_option("--train-max", *train_max, "Use at most this many training rows, evenly strided, or 'all'")
       ->capture_default_str();
-  cmd->add_option("--test-max", *test_max, "Score at most this many rows per test split, evenly strided (0 = all)")
+  cmd->add_option("--test-max", *test_max, "Score at most this many rows per test split, evenly strided, or 'all'")
       ->capture_default_str();
   cmd->callback([=] {
+    BenchOptions o;
+    o.seed = seed_option("--seed", *seed);
+    o.train_max = row_cap_option("--train-max", *train_max);
+    o.test_max = row_cap_option("--test-max", *test_max);
+    for (const auto& kv : *sets) {
+      const auto eq = kv.find('=');
+      if (eq == std::string::npos || eq == 0) throw CLI::ValidationError("--set", "'" + kv + "': expected key=value");
+      o.config.values.emplace_back(kv.substr(0, eq), kv.substr(eq + 1));
+    }
+    add_plugin_paths(*plugin_paths);
     LearnerRegistry registry;
     load_learners(registry, *paths);
-    BenchOptions o;
     o.data = *data;
+    o.model = *model;
     o.learners = registry.expand(*learners);
     o.out = *out;
     o.reps = *reps;
-    o.seed = *seed;
-    o.train_max = *train_max;
-    o.test_max = *test_max;
-    for (const auto& kv : *sets) {
-      const auto eq = kv.find('=');
-      if (eq == std::string::npos || eq == 0) throw LearnerError("--set '" + kv + "': expected key=value");
-      o.config.values.emplace_back(kv.substr(0, eq), kv.substr(eq + 1));
-    }
     o.log = [](const std::string& line) { std::cerr << line << std::endl; };
     const BenchReport r = run_bench(registry, o, *learners == "all");
     for (const auto& s : r.skipped) std::cerr << "skipped " << s << "\n";
@@ -73,7 +81,7 @@ void add_compare(CLI::App& app) {
   auto* cmd = app.add_subcommand("compare", "Print results beside the paper's tables, with deltas and rank agreement");
   auto results = std::make_shared<std::vector<std::string>>();
   auto published = std::make_shared<std::string>(default_published_dir());
-  cmd->add_option("--results", *results, "results.csv from spml bench (repeatable)")->required()->check(CLI::ExistingFile);
+  cmd->add_option("--results", *results, "results.csv from spml bench (repeatable)")->required();
   cmd->add_option("--published", *published, "Folder of the paper's tables")->capture_default_str();
   cmd->callback([=] {
     std::vector<ResultRow> rows;
@@ -97,6 +105,28 @@ void add_learners(CLI::App& app) {
       std::cout << n << "\t" << l->summary << "\t[" << registry.plugin_file(n) << "]\n";
     }
     std::cout << "plus compositions A-B and it-A-B (A parametric, B non-parametric), e.g. LLS-GP, it-SVR-GP\n";
+  });
+}
+
+void add_plugins(CLI::App& app) {
+  auto* cmd = app.add_subcommand("plugins", "List the force plugins found, with their keys and shape parameters");
+  auto paths = std::make_shared<std::vector<std::string>>();
+  cmd->add_option("--plugin-path", *paths, "Extra force-plugin library or folder (also $SPML_PLUGIN_PATH)");
+  cmd->callback([=] {
+    add_plugin_paths(*paths);
+    const PluginCatalog& catalog = force_plugins();
+    for (const auto& w : catalog.warnings()) std::cerr << "spml: warning: " << w << "\n";
+    for (const auto& n : catalog.names()) {
+      const auto* p = static_cast<const spml_force_plugin*>(catalog.find(n));
+      std::cout << n << "\t" << p->summary << "\t[" << catalog.file_of(n) << "]\n";
+      for (const spml_config_key* k = p->config_keys; k && k->name; ++k)
+        std::cout << "    " << k->name << (k->default_value ? " = " + std::string(k->default_value) : std::string(" (required)"))
+                  << "  " << k->help << "\n";
+      for (const spml_shape_param* sp = p->shape_params; sp && sp->key; ++sp)
+        std::cout << "    shape " << sp->key << " in [" << sp->lo << ", " << sp->hi << "]"
+                  << (sp->domain == SPML_SHAPE_POSITION ? " of the position range" : sp->domain == SPML_SHAPE_SPEED ? " of the top speed" : "")
+                  << (sp->log_scale ? ", log scale" : "") << (sp->integer ? ", whole numbers" : "") << "\n";
+    }
   });
 }
 

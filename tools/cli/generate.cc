@@ -5,6 +5,7 @@
 
 #include "commands.h"
 #include "spml/envs/scenarios.h"
+#include "spml/parse.h"
 
 namespace spml::cli {
 
@@ -13,8 +14,8 @@ void add_generate(CLI::App& app) {
   struct Args {
     std::string scenario, out, out_dir;
     bool all = false, quiet = false;
-    std::uint64_t seed = 1;
-    int test_stride = 1;
+    std::string seed = "1";
+    std::string test_stride = "1";
   };
   auto a = std::make_shared<Args>();
   std::string names;
@@ -24,7 +25,7 @@ void add_generate(CLI::App& app) {
   cmd->add_option("--out,-o", a->out, "output file (with --scenario)");
   cmd->add_option("--out-dir", a->out_dir, "output folder (with --all)");
   cmd->add_option("--seed", a->seed, "random seed (same seed, same arrays)");
-  cmd->add_option("--test-stride", a->test_stride, "SimDyn: keep every n-th 1 kHz test sample")->check(CLI::PositiveNumber);
+  cmd->add_option("--test-stride", a->test_stride, "SimDyn: keep every n-th 1 kHz test sample (a whole number >= 1)");
   cmd->add_flag("--quiet,-q", a->quiet, "no progress output");
   sc->excludes(all);
   cmd->callback([a] {
@@ -39,8 +40,10 @@ void add_generate(CLI::App& app) {
       jobs.emplace_back(a->scenario, a->out);
     }
     GenerateOptions opt;
-    opt.seed = a->seed;
-    opt.test_stride = a->test_stride;
+    opt.seed = seed_option("--seed", a->seed);
+    const auto stride = parse_integer(a->test_stride, 1, 1000000);
+    if (!stride) throw CLI::ValidationError("--test-stride", "'" + a->test_stride + "' is not a whole number in [1, 1000000]");
+    opt.test_stride = static_cast<int>(*stride);
     if (!a->quiet)
       opt.progress = [](const std::string& stage, double f) {
         std::cerr << "\r  " << stage << " " << static_cast<int>(100 * f) << "%   " << std::flush;

@@ -18,7 +18,7 @@ void add_regressor(CLI::App& app) {
   auto* cmd = app.add_subcommand("regressor", "Base parameters of an MJCF model's identification regressor");
   struct Args { std::string model; bool json = false, offsets = false, bench = false; };
   auto a = std::make_shared<Args>();
-  cmd->add_option("--model,-m", a->model, "MJCF file (hinge/slide joints)")->required()->check(CLI::ExistingFile);
+  cmd->add_option("--model,-m", a->model, "MJCF file (hinge/slide joints)")->required();
   cmd->add_flag("--json", a->json, "print JSON");
   cmd->add_flag("--offsets", a->offsets, "add a constant-torque parameter per joint");
   cmd->add_flag("--benchmark", a->bench, "also time regressor evaluation (rows per second)");
@@ -32,7 +32,8 @@ void add_regressor(CLI::App& app) {
       const int rows = 20000;
       auto t0 = std::chrono::steady_clock::now();
       double sink = 0;
-      for (int r = 0; r < rows; ++r) { q[0] = 1e-5 * r; sink += reg.evaluate(q, qd, qdd)(0, 0); }
+      auto ws = reg.workspace();
+      for (int r = 0; r < rows; ++r) { q[0] = 1e-5 * r; sink += reg.evaluate(ws, q, qd, qdd)(0, 0); }
       double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       j["benchmark_rows_per_second"] = rows / s;
       j["benchmark_checksum"] = sink;
@@ -50,7 +51,7 @@ void add_identify(CLI::App& app) {
   auto* cmd = app.add_subcommand("identify", "Least-squares identification of an MJCF model's base parameters on a dataset");
   struct Args { std::string model, data, split = "train"; bool json = false, offsets = false; };
   auto a = std::make_shared<Args>();
-  cmd->add_option("--model,-m", a->model, "MJCF file")->required()->check(CLI::ExistingFile);
+  cmd->add_option("--model,-m", a->model, "MJCF file")->required();
   cmd->add_option("--data,-d", a->data, "spml/1 dataset with q:/qd:/qdd:<joint> inputs and tau:<joint> targets")->required();
   cmd->add_option("--split", a->split, "split to identify on; every other split is scored as held out");
   cmd->add_flag("--offsets", a->offsets, "add a constant-torque parameter per joint");

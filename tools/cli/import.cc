@@ -15,7 +15,7 @@ void add_import(CLI::App& app) {
     std::vector<std::string> splits;
   };
   auto a = std::make_shared<Args>();
-  cmd->add_option("INPUT", a->input, "CSV or .mat file")->required()->check(CLI::ExistingFile);
+  cmd->add_option("INPUT", a->input, "CSV or .mat file")->required();
   cmd->add_option("--out,-o", a->out, "output spml/1 file")->required();
   cmd->add_option("--x", a->spec.x, "input columns: NAME, NEW=NAME or NEW=NAME*FACTOR (FACTOR: number or .mat scalar)")
       ->required()->delimiter(',');
@@ -24,6 +24,10 @@ void add_import(CLI::App& app) {
   cmd->add_option("--split", a->splits, "NAME:BEGIN:END in rows or percent, e.g. train:0:64% test:64%: (default: all rows as 'train')");
   cmd->add_option("--format", a->format, "input format")->check(CLI::IsMember({"auto", "csv", "mat"}));
   cmd->callback([a] {
+    namespace fs = std::filesystem;
+    if (!fs::exists(a->input)) throw DatasetError(a->input + ": no such file");
+    if (fs::exists(a->out) && fs::equivalent(a->input, a->out))
+      throw DatasetError(a->out + ": is the input file; choose another --out (import never overwrites its input)");
     std::string fmt = a->format;
     if (fmt == "auto") fmt = std::filesystem::path(a->input).extension() == ".mat" ? "mat" : "csv";
     Table table = fmt == "mat" ? read_mat_table(a->input) : read_csv_table(a->input);

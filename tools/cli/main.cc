@@ -1,13 +1,28 @@
 #include <cstdio>
 #include <exception>
+#include <filesystem>
 #include <iostream>
+#include <new>
 
 #include "commands.h"
+#include "spml_version.h"
+
+namespace {
+
+// Every failure leaves as "spml: error: <file>: <where>: <problem>" with a non-zero exit:
+// 2 for a command line that does not parse, 1 for everything else.
+int fail(const std::string& message, int code) {
+  std::fflush(stdout);
+  std::cerr << "spml: error: " << message << "\n";
+  return code;
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app{"spml: semi-parametric model learning for robot dynamics"};
   app.require_subcommand(1);
-  app.set_version_flag("--version", "spml 0.1.0 (dataset format spml/1)");
+  app.set_version_flag("--version", "spml " SPML_VERSION " (dataset format spml/1, learner ABI 2, force-plugin ABI 2)");
   spml::cli::add_info(app);
   spml::cli::add_import(app);
   spml::cli::add_generate(app);
@@ -16,14 +31,25 @@ int main(int argc, char** argv) {
   spml::cli::add_bench(app);
   spml::cli::add_compare(app);
   spml::cli::add_learners(app);
+  spml::cli::add_plugins(app);
   try {
     app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
+  } catch (const CLI::CallForHelp& e) {
     return app.exit(e);
+  } catch (const CLI::CallForAllHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForVersion& e) {
+    return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    return fail(std::string(e.what()) + " (see spml " + (argc > 1 ? std::string(argv[1]) + " " : "") + "--help)", 2);
+  } catch (const std::filesystem::filesystem_error& e) {
+    std::string where = e.path1().string();
+    if (!e.path2().empty()) where += " -> " + e.path2().string();
+    return fail(where + ": " + e.code().message(), 1);
+  } catch (const std::bad_alloc&) {
+    return fail("out of memory (is the input far larger than expected? see --train-max / --test-max)", 1);
   } catch (const std::exception& e) {
-    std::fflush(stdout);
-    std::cerr << "spml: error: " << e.what() << "\n";
-    return 1;
+    return fail(e.what(), 1);
   }
   return 0;
 }

@@ -198,14 +198,34 @@ const Split& Dataset::get(const std::string& split) const {
   if (const Split* s = find(split)) return *s;
   std::string have;
   for (const auto& s : splits) have += (have.empty() ? "" : ", ") + s.name;
-  throw DatasetError("no split " + quote(split) + " (the file has: " + have + ")");
+  throw DatasetError((source.empty() ? "" : source + ": ") + "no split " + quote(split) + " (the file has: " + have + ")");
 }
+
+namespace {
+// Column names must be non-empty and unique: every consumer matches columns by name.
+void check_column_names(const std::vector<std::string>& columns, const std::string& where) {
+  for (size_t i = 0; i < columns.size(); ++i) {
+    if (columns[i].empty()) throw DatasetError(where + ": column " + std::to_string(i) + " has an empty name");
+    for (size_t j = 0; j < i; ++j)
+      if (columns[j] == columns[i])
+        throw DatasetError(where + ": column name " + quote(columns[i]) + " appears twice (columns " +
+                           std::to_string(j) + " and " + std::to_string(i) + ")");
+  }
+}
+}  // namespace
 
 void validate(const Dataset& ds, const std::string& where, const ReadOptions& options) {
   if (ds.splits.empty()) throw DatasetError(where + ": contains no split groups");
+  for (size_t i = 0; i < ds.splits.size(); ++i)
+    for (size_t j = 0; j < i; ++j)
+      if (ds.splits[i].name == ds.splits[j].name)
+        throw DatasetError(where + ": split " + quote(ds.splits[i].name) + " is given twice");
   for (const Split& s : ds.splits) {
     const std::string g = where + ": group " + quote(s.name);
-    if (s.name.empty() || s.name == "model") throw DatasetError(g + ": not a valid split name");
+    if (s.name.empty() || s.name == "model" || s.name.find_first_of("/.") != std::string::npos)
+      throw DatasetError(g + ": not a valid split name (non-empty, not 'model', no '/' or '.')");
+    check_column_names(s.x_columns, g + ": dataset 'X'");
+    check_column_names(s.y_columns, g + ": dataset 'Y'");
     if (static_cast<Eigen::Index>(s.x_columns.size()) != s.X.cols())
       throw DatasetError(g + ": dataset 'X': attribute 'columns' names " + std::to_string(s.x_columns.size()) +
                          " columns but the dataset has " + std::to_string(s.X.cols()));
@@ -224,6 +244,7 @@ void validate(const Dataset& ds, const std::string& where, const ReadOptions& op
     if (!options.allow_nonfinite) {
       check_finite(s.X, s.x_columns, g + ": dataset 'X'");
       check_finite(s.Y, s.y_columns, g + ": dataset 'Y'");
+      if (s.t.size()) check_finite(RowMatrix(s.t), {"t"}, g + ": dataset 't'");
     }
   }
   const ModelInfo& m = ds.model;
@@ -294,6 +315,7 @@ Dataset read_dataset(const std::string& path, const ReadOptions& options) {
                        e.getDetailMsg());
   }
   validate(out, path, options);
+  out.source = path;
   return out;
 }
 

@@ -1,10 +1,14 @@
 #include "spml/import.h"
 
+#include "spml/csv.h"
+#include "spml/parse.h"
+
 #include <matio.h>
 
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
+#include <iterator>
 #include <sstream>
 
 namespace spml {
@@ -13,10 +17,9 @@ namespace {
 [[noreturn]] void fail(const std::string& msg) { throw DatasetError(msg); }
 
 bool parse_double(const std::string& text, double& value) {
-  if (text.empty()) return false;
-  char* end = nullptr;
-  value = std::strtod(text.c_str(), &end);
-  return end && *end == '\0';
+  const auto v = parse_number(text);
+  if (v) value = *v;
+  return v.has_value();
 }
 
 Eigen::Index parse_bound(const std::string& text, Eigen::Index rows, Eigen::Index fallback, const std::string& where) {
@@ -61,38 +64,63 @@ Eigen::VectorXd resolve_column(const Table& table, const std::string& spec, std:
 
 }  // namespace
 
-Table read_csv_table(const std::string& path) {
-  std::ifstream in(path);
+int CsvText::column(const std::string& name) const {
+  for (size_t i = 0; i < header.size(); ++i)
+    if (header[i] == name) return static_cast<int>(i);
+  return -1;
+}
+
+CsvText read_csv(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
   if (!in) fail(path + ": cannot open");
-  Table t;
+  std::string content((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (content.rfind("\x89HDF\r\n\x1a\n", 0) == 0)
+    fail(path + ": is an HDF5 file, not CSV text (import reads CSV or .mat; spml/1 files need no import)");
+  if (content.find('\0') != std::string::npos) fail(path + ": is a binary file, not CSV text");
+  CsvText t;
   t.source = path;
+  std::istringstream lines(content);
   std::string line;
   size_t lineno = 0;
-  std::vector<std::vector<double>> cols;
-  while (std::getline(in, line)) {
+  while (std::getline(lines, line)) {
     ++lineno;
     if (!line.empty() && line.back() == '\r') line.pop_back();
     if (line.find_first_not_of(" \t") == std::string::npos) continue;
     auto cells = split_list(line);
-    if (t.names.empty()) {
-      t.names = cells;
-      for (size_t i = 0; i < cells.size(); ++i)
-        if (cells[i].empty()) fail(path + ":" + std::to_string(lineno) + ": header column " + std::to_string(i + 1) + " has no name");
-      cols.resize(cells.size());
+    const std::string where = path + ":" + std::to_string(lineno);
+    if (t.header.empty()) {
+      for (size_t i = 0; i < cells.size(); ++i) {
+        if (cells[i].empty()) fail(where + ": header column " + std::to_string(i + 1) + " has no name");
+        for (size_t j = 0; j < i; ++j)
+          if (cells[j] == cells[i]) fail(where + ": header names column '" + cells[i] + "' twice");
+      }
+      t.header = std::move(cells);
       continue;
     }
-    if (cells.size() != t.names.size())
-      fail(path + ":" + std::to_string(lineno) + ": " + std::to_string(cells.size()) + " fields, header has " +
-           std::to_string(t.names.size()));
-    for (size_t i = 0; i < cells.size(); ++i) {
-      double v;
-      if (!parse_double(cells[i], v))
-        fail(path + ":" + std::to_string(lineno) + ": column '" + t.names[i] + "': '" + cells[i] + "' is not a number");
-      cols[i].push_back(v);
-    }
+    if (cells.size() != t.header.size())
+      fail(where + ": " + std::to_string(cells.size()) + " fields, header has " + std::to_string(t.header.size()));
+    t.rows.push_back(std::move(cells));
+    t.line.push_back(lineno);
   }
-  if (t.names.empty()) fail(path + ": empty file (expected a header row)");
-  for (auto& c : cols) t.columns.push_back(Eigen::Map<Eigen::VectorXd>(c.data(), static_cast<Eigen::Index>(c.size())));
+  if (t.header.empty()) fail(path + ": empty file (expected a header row)");
+  return t;
+}
+
+Table read_csv_table(const std::string& path) {
+  const CsvText csv = read_csv(path);
+  Table t;
+  t.source = path;
+  t.names = csv.header;
+  std::vector<Eigen::VectorXd> cols(csv.header.size(), Eigen::VectorXd(static_cast<Eigen::Index>(csv.rows.size())));
+  for (size_t r = 0; r < csv.rows.size(); ++r)
+    for (size_t c = 0; c < csv.header.size(); ++c) {
+      const auto v = parse_number(csv.rows[r][c]);
+      if (!v)
+        fail(path + ":" + std::to_string(csv.line[r]) + ": column '" + csv.header[c] + "': '" + csv.rows[r][c] +
+             "' is not a finite number");
+      cols[c][static_cast<Eigen::Index>(r)] = *v;
+    }
+  t.columns = std::move(cols);
   return t;
 }
 
@@ -157,10 +185,18 @@ Dataset table_to_dataset(const Table& table, const ImportSpec& spec) {
   if (!spec.t.empty()) { std::string n; tcol = resolve_column(table, spec.t, n); }
   std::vector<SplitRange> ranges = spec.splits;
   if (ranges.empty()) ranges.push_back({"train", "", ""});
-  for (const auto& r : ranges) {
+  std::vector<std::pair<Eigen::Index, Eigen::Index>> taken;
+  for (size_t ri = 0; ri < ranges.size(); ++ri) {
+    const SplitRange& r = ranges[ri];
     const std::string where = table.source + ": split '" + r.name + "'";
     Eigen::Index b = parse_bound(r.begin, N, 0, where), e = parse_bound(r.end, N, N, where);
     if (e <= b) fail(where + ": empty row range [" + std::to_string(b) + ", " + std::to_string(e) + ")");
+    // Overlapping splits would leak training rows into a test split.
+    for (size_t k = 0; k < taken.size(); ++k)
+      if (b < taken[k].second && taken[k].first < e)
+        fail(where + ": rows [" + std::to_string(b) + ", " + std::to_string(e) + ") overlap split '" + ranges[k].name +
+             "' rows [" + std::to_string(taken[k].first) + ", " + std::to_string(taken[k].second) + ")");
+    taken.emplace_back(b, e);
     Split s;
     s.name = r.name;
     s.x_columns = xn;

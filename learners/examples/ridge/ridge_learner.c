@@ -22,7 +22,7 @@ static void* ridge_fit(const spml_learner_data* d, const spml_learner_model* mod
   }
   double lambda = 1e-6;
   for (int32_t i = 0; i < config->count; ++i)
-    if (strcmp(config->keys[i], "lambda") == 0) lambda = atof(config->values[i]);
+    if (strcmp(config->keys[i], "lambda") == 0) lambda = strtod(config->values[i], NULL); /* already checked by the host */
   const int32_t M = d->params;
   const int64_t rows = d->rows * d->outputs;
   double* A = calloc((size_t)(M * M), sizeof(double));
@@ -99,10 +99,15 @@ static void ridge_destroy(void* state) {
   free(s);
 }
 
+/* The host checks --set values against this table (type and bounds) before any fit. */
+static const spml_config_key ridge_keys[] = {
+    {"lambda", SPML_VALUE_NUMBER, 0.0, HUGE_VAL, "1e-6", "penalty per row on |theta|^2"},
+    {NULL, 0, 0, 0, NULL, NULL}};
+
 static const spml_learner ridge = {
     SPML_LEARNER_ABI_VERSION, "Ridge", "ridge regression on the model features (example)",
-    SPML_LEARNER_USES_MODEL | SPML_LEARNER_PARAMETRIC | SPML_LEARNER_DETERMINISTIC, "lambda",
+    SPML_LEARNER_USES_MODEL | SPML_LEARNER_PARAMETRIC | SPML_LEARNER_DETERMINISTIC, ridge_keys,
     ridge_fit, ridge_predict, NULL, ridge_coefficients, ridge_destroy};
 
-SPML_LEARNER_EXPORT int32_t spml_learner_abi_version(void) { return SPML_LEARNER_ABI_VERSION; }
-SPML_LEARNER_EXPORT const spml_learner* spml_learner_get(int32_t i) { return i == 0 ? &ridge : NULL; }
+SPML_EXPORT int32_t spml_learner_abi_version(void) { return SPML_LEARNER_ABI_VERSION; }
+SPML_EXPORT const spml_learner* spml_learner_get(int32_t i) { return i == 0 ? &ridge : NULL; }

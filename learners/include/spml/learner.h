@@ -1,6 +1,7 @@
-/* spml learner plugin ABI, version 1.
+/* spml learner plugin ABI, version 2.
  *
- * A learner is a shared library that exports two C functions:
+ * A learner is a shared library that exports two C functions (spml/abi.h explains the
+ * conventions shared with the force-plugin ABI):
  *
  *   int32_t spml_learner_abi_version(void);          returns SPML_LEARNER_ABI_VERSION
  *   const spml_learner* spml_learner_get(int32_t i); i-th learner it provides, NULL past the end
@@ -15,6 +16,10 @@
  *   phi the parametric model's regressor, (outputs*rows) x params, row-major, output-major:
  *       row o*rows + i holds phi_o(x_i), so that the model predicts y[i][o] = phi row . theta.
  *   variance: the predictive variance of an observation (noise included), rows x outputs.
+ *
+ * Version history: 1 - config_keys was a comma-separated string. 2 - config_keys is a typed
+ * spml_config_key table (the host checks every --set value before any fit), export macro
+ * SPML_EXPORT from spml/abi.h.
  */
 #ifndef SPML_LEARNER_H
 #define SPML_LEARNER_H
@@ -22,11 +27,13 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "spml/abi.h"
+
 #ifdef __cplusplus
 extern "C" {
 #endif
 
-#define SPML_LEARNER_ABI_VERSION 1
+#define SPML_LEARNER_ABI_VERSION 2
 
 /* flags */
 #define SPML_LEARNER_USES_MODEL      1u  /* reads phi/theta; the host must supply a parametric model */
@@ -66,7 +73,7 @@ typedef struct spml_learner {
   const char* name;          /* as in the paper's tables, e.g. "SPGP-SepKer" */
   const char* summary;       /* one line */
   uint32_t flags;
-  const char* config_keys;   /* comma-separated keys fit() accepts ("" for none) */
+  const spml_config_key* config_keys;   /* keys fit() accepts, {NULL}-terminated (NULL: none) */
 
   /* Fits and returns an opaque state, or NULL after writing a message into error. */
   void* (*fit)(const spml_learner_data* train, const spml_learner_model* model,
@@ -85,12 +92,6 @@ typedef struct spml_learner {
   int32_t (*coefficients)(void* state, double* theta, int32_t capacity);
   void (*destroy)(void* state);
 } spml_learner;
-
-#if defined(_WIN32)
-#define SPML_LEARNER_EXPORT __declspec(dllexport)
-#else
-#define SPML_LEARNER_EXPORT __attribute__((visibility("default")))
-#endif
 
 #ifdef __cplusplus
 }

@@ -38,8 +38,16 @@ class MjcfRegressor {
   const std::vector<std::string>& param_names() const { return names_; }
   const Eigen::VectorXd& model_params() const { return pi_; }
 
-  // Y for one state: nv x num_params.
-  Eigen::MatrixXd evaluate(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd) const;
+  // The mutable half of an evaluation (MuJoCo's mjData), kept apart from the model as
+  // MuJoCo and Pinocchio do: one workspace per thread, the regressor itself stays const.
+  struct Workspace {
+    DataPtr d;
+  };
+  Workspace workspace() const { return Workspace{make_data(m_.get())}; }
+
+  // Y for one state: nv x num_params (q, qd, qdd indexed by joint).
+  Eigen::MatrixXd evaluate(Workspace& ws, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                           const Eigen::VectorXd& qdd) const;
 
   struct Base {
     int rank = 0;
@@ -57,13 +65,26 @@ class MjcfRegressor {
 
  private:
   ModelPtr m_;
-  DataPtr d_;
   std::unique_ptr<ForceEffects> effects_;
   RegressorOptions options_;
   std::vector<std::string> joints_, names_;
   Eigen::VectorXd pi_;
   std::vector<int> tendons_, stiff_joints_;
 };
+
+// Where the joints of an MJCF are in a split: X columns q:/qd:/qdd:<joint> for every joint,
+// Y columns tau:<joint> (every Y column must name a model joint; joints without one are
+// not scored). Throws DatasetError naming the split and the missing or unknown column.
+struct JointColumns {
+  std::vector<int> q, qd, qdd;     // per model joint: X column
+  std::vector<int> output_dof;     // per Y column: the dof of its joint
+  JointColumns(const MjcfRegressor& reg, const Split& s);
+};
+
+// The stacked base regressor (rows output-major: o * N + i, outputs = the split's Y
+// columns) of a split. Throws DatasetError naming the row when a value makes it non-finite.
+Eigen::MatrixXd stacked_base_regressor(const MjcfRegressor& reg, const MjcfRegressor::Base& base, const Split& s,
+                                       const JointColumns& cols);
 
 // Least-squares identification of base parameters on one split of a dataset whose X has
 // q:/qd:/qdd:<joint> and whose Y has tau:<joint> for every joint of the model.

@@ -17,7 +17,7 @@ using DataPtr = std::unique_ptr<mjData, DataDeleter>;
 ModelPtr load_mjcf(const std::string& path);
 inline DataPtr make_data(const mjModel* m) { return DataPtr(mj_makeData(m)); }
 
-// Directory holding the project's MJCF models: $SPML_MJCF_DIR, else the source tree's mjcf/.
+// Directory holding the project's MJCF models: $SPML_MJCF_DIR, else <share>/spml/mjcf.
 std::string mjcf_dir();
 std::string mjcf_path(const std::string& file);   // mjcf_dir()/file
 

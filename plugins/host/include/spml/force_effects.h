@@ -21,13 +21,9 @@
 #include <Eigen/Core>
 
 #include "spml/force_plugin.h"
+#include "spml/plugin_loader.h"
 
 namespace spml {
-
-class PluginError : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-};
 
 struct PluginDeclaration {
   std::string element;    // e.g. <custom><text name="spml.plugin.band">
@@ -40,13 +36,13 @@ struct PluginDeclaration {
 // Parses the declarations of a compiled model; `source` (the MJCF path) prefixes messages.
 std::vector<PluginDeclaration> parse_plugin_declarations(const mjModel* m, const std::string& source);
 
-// Where plugin libraries are looked for, in order: directories in $SPML_PLUGIN_PATH
-// (colon-separated), then the build tree's plugin folder, then the install folder.
-std::vector<std::string> plugin_search_path();
-
-// A loaded plugin library (kept loaded for the life of the process).
-const spmlForcePlugin& load_force_plugin(const std::string& type, const std::string& element = "");
-// Names of all plugins found on the search path.
+// The force plugins of this process: the shipped ones, then $SPML_PLUGIN_PATH (see
+// spml/plugin_loader.h for the search order). Created on first use; a command line may
+// add folders (--plugin-path) before any model is loaded.
+PluginCatalog& force_plugins();
+// The plugin called `type`; throws PluginError naming `element` and what is available.
+const spml_force_plugin& load_force_plugin(const std::string& type, const std::string& element = "");
+// Names of all plugins found.
 std::vector<std::string> available_force_plugins();
 
 // The plugin instances of one model. While attached, MuJoCo's passive-force callback adds
@@ -60,7 +56,7 @@ class ForceEffects {
 
   struct Instance {
     PluginDeclaration decl;
-    const spmlForcePlugin* plugin;
+    const spml_force_plugin* plugin;
     void* state;
     int param_offset, nparam;
   };

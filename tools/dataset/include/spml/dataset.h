@@ -10,11 +10,11 @@
 #include <string>
 #include <vector>
 
+#include "spml/row_matrix.h"
+
 namespace spml {
 
 inline constexpr const char* kFormatName = "spml/1";
-
-using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 
 // Any problem with a dataset file: the message names the file and, where it applies, the
 // group, dataset and rows involved.
@@ -49,6 +49,7 @@ struct ModelInfo {
 };
 
 struct Dataset {
+  std::string source;                              // the file it was read from ("" if made in memory)
   std::vector<Split> splits;
   ModelInfo model;
   std::map<std::string, std::string> provenance;   // root string attributes besides "format"

@@ -5,25 +5,13 @@
 #include <string>
 #include <vector>
 
+#include "spml/learners/results.h"
+
 namespace spml {
 
-struct ResultRow {
-  std::string scenario, split, algo;
-  int output = 0;
-  double rmse_mean = 0, rmse_std = 0, rmse_min = 0, rmse_max = 0;
-  double nllh_mean = 0, nllh_std = 0, nllh_min = 0, nllh_max = 0;
-  std::string warnings;
-};
-
-// Reads a results.csv written by `spml bench`; throws naming the file, line and column.
-std::vector<ResultRow> read_results(const std::string& path);
-// Reads one of the paper's tables (algo,rmsemean,...; "-" = not given, "inf").
-std::vector<ResultRow> read_published_table(const std::string& path);
-
+// The paper's tables shipped with spml: <share>/published.
 std::string default_published_dir();
 
-// Paper spellings that differ from ours ("SPGP-from-zeroes").
-std::string canonical_algo(const std::string& name);
 
 // Rank agreement between two score lists over the same items (lower is better).
 double spearman_rho(const std::vector<double>& a, const std::vector<double>& b);

@@ -16,9 +16,9 @@ namespace spml {
 struct Scores {
   std::vector<double> rmse, nllh;
 };
-Scores score(const LearnerMatrix& Y, const LearnerPrediction& p);
+Scores score(const RowMatrix& Y, const LearnerPrediction& p);
 
-// mean, std (population, ddof = 0 as numpy), min, max.
+// mean, std (population, ddof = 0 as numpy; exactly 0 when all values are equal), min, max.
 struct Summary {
   double mean = 0, std = 0, min = 0, max = 0;
 };
@@ -26,6 +26,7 @@ Summary summarize(const std::vector<double>& values);
 
 struct BenchOptions {
   std::string data;                 // spml/1 file
+  std::string model;                // MJCF giving the parametric model ("" = the dataset's own)
   std::vector<std::string> learners;
   int reps = 5;
   std::uint64_t seed = 1;           // repetition r runs with seed + r
@@ -42,9 +43,13 @@ struct BenchReport {
   int units_run = 0, units_cached = 0;
 };
 
-// Runs (or resumes) a benchmark. Finished (learner, repetition) units are kept in
-// out/units and reused by a rerun with the same data and settings; results.csv and
-// predictions.h5 are rewritten atomically from all finished units.
+// Runs (or resumes) a benchmark. Every (learner, repetition) unit is kept in out/units with a
+// key hashed from the data it saw (train and test values, columns, the model's regressor
+// and coefficients) and the settings that shape it (learner, seed, config, row caps); a
+// rerun reuses a unit only when its key matches, and refits it otherwise (also when the
+// file is unreadable). Config values are checked against the learners' key tables before
+// anything is fitted or written. results.csv and predictions.h5 are rewritten atomically
+// from the finished units.
 BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& options, bool all_requested = false);
 
 // Rows actually used from a split of `rows` rows with a cap of `max` (0 = all): an even stride.

@@ -14,12 +14,13 @@
 #include <vector>
 
 #include "spml/learner.h"
+#include "spml/plugin_loader.h"
+#include "spml/row_matrix.h"
 
 namespace spml {
 
-using LearnerMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-
-// Any problem loading or running a learner; the message names the file or the learner.
+// Any problem running a learner; the message names the learner. (Loading problems are
+// PluginError, shared with the force plugins.)
 class LearnerError : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
@@ -37,15 +38,15 @@ struct LearnerModel {
 
 // Inputs of fit/predict. phi: (outputs*rows) x params, output-major; null without a model.
 struct LearnerData {
-  const LearnerMatrix* X = nullptr;
-  const LearnerMatrix* Y = nullptr;   // null in predict
-  const LearnerMatrix* phi = nullptr;
+  const RowMatrix* X = nullptr;
+  const RowMatrix* Y = nullptr;   // null in predict
+  const RowMatrix* phi = nullptr;
   int outputs = 0;
 };
 
 struct LearnerPrediction {
-  LearnerMatrix mean;   // rows x outputs
-  LearnerMatrix var;    // rows x outputs, empty when the learner has no variance
+  RowMatrix mean;   // rows x outputs
+  RowMatrix var;    // rows x outputs, empty when the learner has no variance
 };
 
 class Learner {
@@ -61,21 +62,18 @@ class Learner {
   bool uses_model() const { return flags() & SPML_LEARNER_USES_MODEL; }
 };
 
-class LearnerLibrary;
-
-// All learners found on a search path, plus their compositions.
+// All learners found on the search path (spml/plugin_loader.h), plus their compositions.
 class LearnerRegistry {
  public:
   LearnerRegistry();
-  ~LearnerRegistry();
-  // The build's learner folder, then the folders in $SPML_LEARNER_PATH (':'-separated).
-  static std::vector<std::string> default_search_path();
-  // A folder (every *.so in it is loaded) or one library file. Throws LearnerError naming
-  // the file for a library that is not a learner, has another ABI version or clashes.
-  void add(const std::string& folder_or_file);
+  // The shipped learners, then the folders in $SPML_LEARNER_PATH (':'-separated).
   void add_default_path();
+  // A folder (every *.so in it; one that is not a learner library is skipped with a
+  // warning) or one library file (which must load). Throws PluginError naming the file.
+  void add(const std::string& folder_or_file);
+  const std::vector<std::string>& warnings() const { return catalog_.warnings(); }
 
-  std::vector<std::string> plugin_names() const;   // in load order
+  const std::vector<std::string>& plugin_names() const { return catalog_.names(); }   // in load order
   const spml_learner* plugin(const std::string& name) const;
   std::string plugin_file(const std::string& name) const;
   // "all" (every plugin, and A-B, it-A-B for each parametric A and non-parametric B) or a
@@ -84,15 +82,13 @@ class LearnerRegistry {
   std::unique_ptr<Learner> create(const std::string& name) const;
   // Config keys the named learner accepts (compositions: both parts, plus "iterations").
   std::set<std::string> config_keys(const std::string& name) const;
+  // "" if `value` suits key `key` of learner `name` (type and bounds from the learner's key
+  // table), else the problem. The key must be one config_keys(name) lists.
+  std::string check_config(const std::string& name, const std::string& key, const std::string& value) const;
 
  private:
-  bool parse_composition(const std::string& name, std::string* a, std::string* b, bool* iterative) const;
-  std::vector<std::shared_ptr<LearnerLibrary>> libraries_;
-  std::map<std::string, std::pair<const spml_learner*, std::shared_ptr<LearnerLibrary>>> plugins_;
-  std::vector<std::string> order_;
+  bool split_composition(const std::string& name, std::string* a, std::string* b, bool* iterative) const;
+  PluginCatalog catalog_;
 };
-
-// Iterations of it-A-B when the config does not say (the paper: "a fixed number of times").
-inline constexpr int kDefaultIterations = 3;
 
 }  // namespace spml

@@ -1,0 +1,401 @@
+// spml bench: selection, data preparation, unit keys, fitting and aggregation, each a step.
+#include <signal.h>
+
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <iomanip>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <sstream>
+
+#include "spml/envs/parametric_model.h"
+#include "spml/learners/evaluate.h"
+#include "spml/learners/results.h"
+#include "spml/matrix_file.h"
+#include "spml/parse.h"
+
+namespace spml {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string fmt(double v) {
+  std::ostringstream s;
+  s << std::setprecision(6) << v;
+  return s.str();
+}
+
+// ---- 64-bit FNV-1a over everything a unit depends on ----
+class Hasher {
+ public:
+  void bytes(const void* p, size_t n) {
+    const auto* b = static_cast<const unsigned char*>(p);
+    for (size_t i = 0; i < n; ++i) h_ = (h_ ^ b[i]) * 1099511628211ull;
+  }
+  void text(const std::string& s) {
+    const uint64_t n = s.size();
+    bytes(&n, sizeof n);
+    bytes(s.data(), s.size());
+  }
+  template <class M>
+  void matrix(const M& m) {
+    const int64_t dims[2] = {m.rows(), m.cols()};
+    bytes(dims, sizeof dims);
+    if (m.size()) bytes(m.data(), static_cast<size_t>(m.size()) * sizeof(double));
+  }
+  std::string hex() const {
+    std::ostringstream s;
+    s << std::hex << std::setw(16) << std::setfill('0') << h_;
+    return s.str();
+  }
+
+ private:
+  uint64_t h_ = 1469598103934665603ull;
+};
+
+// One split as the learners see it, its columns in the train split's order.
+struct Part {
+  std::string name;
+  std::vector<Eigen::Index> rows;
+  RowMatrix X, Y, phi;
+  bool has_phi = false;
+  LearnerData data(bool with_y) const {
+    LearnerData d;
+    d.X = &X;
+    d.Y = with_y ? &Y : nullptr;
+    d.phi = has_phi ? &phi : nullptr;
+    d.outputs = static_cast<int>(Y.cols());
+    return d;
+  }
+};
+
+// Column j of the result is the column of `have` named want[j]; refuses missing or extra names.
+std::vector<int> match_columns(const std::vector<std::string>& want, const std::vector<std::string>& have,
+                               const std::string& where) {
+  std::vector<int> idx;
+  std::string missing, extra;
+  for (const auto& w : want) {
+    const auto it = std::find(have.begin(), have.end(), w);
+    if (it == have.end()) missing += (missing.empty() ? "" : ", ") + w;
+    idx.push_back(static_cast<int>(it - have.begin()));
+  }
+  for (const auto& h : have)
+    if (std::find(want.begin(), want.end(), h) == want.end()) extra += (extra.empty() ? "" : ", ") + h;
+  if (!missing.empty() || !extra.empty())
+    throw DatasetError(where + ": columns differ from the train split's (matched by name)" +
+                       (missing.empty() ? "" : "; missing: " + missing) + (extra.empty() ? "" : "; not in train: " + extra));
+  return idx;
+}
+
+Part make_part(const Split& s, const Split& train, Eigen::Index max, const ParametricModel* model, const std::string& file) {
+  const std::string where = file + ": split '" + s.name + "'";
+  const std::vector<int> xc = match_columns(train.x_columns, s.x_columns, where + ": X");
+  const std::vector<int> yc = match_columns(train.y_columns, s.y_columns, where + ": Y");
+  Part p;
+  p.name = s.name;
+  p.rows = strided_rows(s.rows(), max);
+  p.X.resize(static_cast<Eigen::Index>(p.rows.size()), static_cast<Eigen::Index>(xc.size()));
+  p.Y.resize(p.X.rows(), static_cast<Eigen::Index>(yc.size()));
+  for (Eigen::Index i = 0; i < p.X.rows(); ++i) {
+    for (size_t j = 0; j < xc.size(); ++j) p.X(i, static_cast<Eigen::Index>(j)) = s.X(p.rows[static_cast<size_t>(i)], xc[j]);
+    for (size_t j = 0; j < yc.size(); ++j) p.Y(i, static_cast<Eigen::Index>(j)) = s.Y(p.rows[static_cast<size_t>(i)], yc[j]);
+  }
+  if (model) {
+    p.phi = model->stacked(p.X);
+    p.has_phi = true;
+  }
+  return p;
+}
+
+std::string scenario_name(const Dataset& ds, const std::string& file) {
+  auto it = ds.provenance.find("scenario");
+  return it != ds.provenance.end() ? it->second : fs::path(file).stem().string();
+}
+
+struct Selected {
+  std::string name;
+  std::uint32_t flags;
+};
+
+// Which learners can run here; "all" quietly leaves out (and names) what the data cannot support.
+std::vector<Selected> select_learners(const LearnerRegistry& registry, const BenchOptions& o, const ParametricModel* model,
+                                      const std::string& model_problem, bool all_requested, BenchReport& report) {
+  std::vector<Selected> out;
+  for (const auto& name : o.learners) {
+    const std::uint32_t f = registry.create(name)->flags();
+    std::string why;
+    if ((f & SPML_LEARNER_USES_MODEL) && !model) why = "needs a parametric model: " + model_problem;
+    else if ((f & SPML_LEARNER_NEEDS_TRUTH) && model->truth.size() == 0) why = "the dataset has no true coefficients";
+    else if ((f & SPML_LEARNER_NEEDS_PRIOR) && model->prior.size() == 0) why = "the dataset has no prior coefficients";
+    if (why.empty()) out.push_back({name, f});
+    else if (all_requested) report.skipped.push_back(name + ": " + why);
+    else throw LearnerError("learner '" + name + "' cannot run on " + o.data + ": " + why);
+  }
+  return out;
+}
+
+// Every --set key must be understood by a selected learner, and its value must suit every
+// learner that takes it: checked before anything is fitted or written.
+void check_config(const LearnerRegistry& registry, const std::vector<Selected>& learners, const LearnerConfig& config) {
+  for (const auto& [k, v] : config.values) {
+    bool used = false;
+    for (const auto& l : learners) {
+      if (!registry.config_keys(l.name).count(k)) continue;
+      used = true;
+      if (std::string why = registry.check_config(l.name, k, v); !why.empty())
+        throw LearnerError("--set " + k + "=" + v + ": " + l.name + ": " + why);
+    }
+    if (!used) throw LearnerError("--set " + k + ": no selected learner accepts the key '" + k + "'");
+  }
+}
+
+// The key of one unit: the data (every part, its columns, the regressor, the coefficients)
+// hashed once, plus what is particular to the unit.
+std::string data_key(const std::vector<Part>& parts, const Split& train, const LearnerModel& lm) {
+  Hasher h;
+  for (const auto& c : train.x_columns) h.text(c);
+  for (const auto& c : train.y_columns) h.text(c);
+  for (const Part& p : parts) {
+    h.text(p.name);
+    h.matrix(p.X);
+    h.matrix(p.Y);
+    if (p.has_phi) h.matrix(p.phi);
+  }
+  for (const auto& n : lm.names) h.text(n);
+  h.matrix(lm.prior);
+  h.matrix(lm.truth);
+  return h.hex();
+}
+
+std::string unit_key(const std::string& data_key, const LearnerRegistry& registry, const std::string& learner,
+                     const LearnerConfig& config, std::uint64_t seed) {
+  Hasher h;
+  h.text(data_key);
+  h.text(learner);
+  h.bytes(&seed, sizeof seed);
+  const auto keys = registry.config_keys(learner);
+  for (const auto& [k, v] : config.values)
+    if (keys.count(k)) {
+      h.text(k);
+      h.text(v);
+    }
+  return h.hex();
+}
+
+std::string unit_path(const std::string& out, const std::string& algo, int rep) {
+  return (fs::path(out) / "units" / algo / ("rep" + std::to_string(rep) + ".h5")).string();
+}
+
+// Temporary files of writers that no longer run (an interrupted bench): name.tmp-<pid>.
+void remove_stale_temporaries(const std::string& out, const std::function<void(const std::string&)>& log) {
+  std::error_code ec;
+  for (auto it = fs::recursive_directory_iterator(out, ec); !ec && it != fs::recursive_directory_iterator(); it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    const auto pos = name.rfind(".tmp-");
+    if (pos == std::string::npos || !it->is_regular_file()) continue;
+    char* end = nullptr;
+    const long pid = std::strtol(name.c_str() + pos + 5, &end, 10);
+    if (*end != '\0' || pid <= 0) continue;
+    if (::kill(static_cast<pid_t>(pid), 0) == 0 || errno != ESRCH) continue;   // its writer still runs
+    std::error_code rm;
+    fs::remove(it->path(), rm);
+    if (log) log("removed " + it->path().string() + " (left by an interrupted run)");
+  }
+}
+
+// A finished unit, or nothing when the file is missing, unreadable or made for another key.
+std::optional<MatrixFile> read_unit(const std::string& path, const std::string& key, std::string* why) {
+  if (!fs::exists(path)) return std::nullopt;
+  try {
+    MatrixFile u = read_matrix_file(path);
+    if (u.attributes.count("key") && u.attributes.at("key") == key && u.attributes.count("fit_seconds")) return u;
+    *why = "made with other data or settings";
+  } catch (const std::exception&) {
+    *why = "unreadable (interrupted write?)";
+  }
+  return std::nullopt;
+}
+
+void fit_unit(Learner& learner, const std::vector<Part>& parts, const LearnerModel& lm, const LearnerConfig& config,
+              const std::string& key, const std::string& path, std::string* summary) {
+  const auto t0 = std::chrono::steady_clock::now();
+  learner.fit(parts.front().data(true), lm, config);
+  const auto t1 = std::chrono::steady_clock::now();
+  MatrixFile unit;
+  std::ostringstream line;
+  for (size_t pi = 1; pi < parts.size(); ++pi) {
+    LearnerPrediction pred = learner.predict(parts[pi].data(false));
+    if (!pred.mean.allFinite()) throw LearnerError(learner.name() + ": non-finite predictive mean on " + parts[pi].name);
+    if (pred.var.size() && !(pred.var.array() > 0).all() && pred.var.allFinite())
+      throw LearnerError(learner.name() + ": predictive variance not positive on " + parts[pi].name);
+    if (pred.var.size() && !pred.var.allFinite())
+      throw LearnerError(learner.name() + ": non-finite predictive variance on " + parts[pi].name);
+    unit.matrices[parts[pi].name + "/mean"] = pred.mean;
+    if (pred.var.size()) unit.matrices[parts[pi].name + "/var"] = pred.var;
+    const Scores sc = score(parts[pi].Y, pred);
+    line << " " << parts[pi].name << " RMSE";
+    for (double r : sc.rmse) line << " " << fmt(r);
+  }
+  const auto t2 = std::chrono::steady_clock::now();
+  const Eigen::VectorXd coef = learner.coefficients();
+  if (coef.size()) unit.matrices["coefficients"] = RowMatrix(coef.transpose());
+  unit.attributes["key"] = key;
+  unit.attributes["learner"] = learner.name();
+  unit.attributes["notes"] = learner.notes();
+  unit.attributes["fit_seconds"] = fmt(std::chrono::duration<double>(t1 - t0).count());
+  unit.attributes["predict_seconds"] = fmt(std::chrono::duration<double>(t2 - t1).count());
+  fs::create_directories(fs::path(path).parent_path());
+  write_matrix_file(path, unit);
+  *summary = unit.attributes["fit_seconds"] + " s;" + line.str();
+}
+
+// results.csv rows and predictions of one learner from its units (all repetitions present).
+void aggregate(const std::string& scenario, const std::string& name, bool deterministic, int reps,
+               const std::vector<MatrixFile>& units, const std::vector<Part>& parts, std::vector<ResultRow>& rows,
+               MatrixFile& predictions) {
+  double fitsec = 0;
+  std::string warnings;
+  for (const auto& u : units) {
+    fitsec += parse_number(u.attributes.at("fit_seconds")).value_or(0.0);
+    const std::string& n = u.attributes.count("notes") ? u.attributes.at("notes") : std::string();
+    if (!n.empty() && warnings.find(n) == std::string::npos) warnings += (warnings.empty() ? "" : " | ") + n;
+  }
+  fitsec /= static_cast<double>(units.size());
+  for (size_t pi = 1; pi < parts.size(); ++pi) {
+    const Part& part = parts[pi];
+    std::vector<std::vector<double>> rmse(static_cast<size_t>(part.Y.cols())), nllh(rmse.size());
+    for (int r = 0; r < reps; ++r) {
+      const MatrixFile& u = units[deterministic ? 0 : static_cast<size_t>(r)];
+      LearnerPrediction p;
+      p.mean = u.matrices.at(part.name + "/mean");
+      if (u.matrices.count(part.name + "/var")) p.var = u.matrices.at(part.name + "/var");
+      const Scores sc = score(part.Y, p);
+      for (size_t k = 0; k < rmse.size(); ++k) {
+        rmse[k].push_back(sc.rmse[k]);
+        nllh[k].push_back(sc.nllh[k]);
+      }
+      if (!deterministic || r == 0) {
+        const std::string key = part.name + "/" + name + "/rep" + std::to_string(r);
+        predictions.matrices[key + "/mean"] = p.mean;
+        if (p.var.size()) predictions.matrices[key + "/std"] = p.var.cwiseSqrt();
+      }
+    }
+    for (size_t k = 0; k < rmse.size(); ++k) {
+      const Summary a = summarize(rmse[k]), b = summarize(nllh[k]);
+      rows.push_back({scenario, part.name, name, static_cast<int>(k), a.mean, a.std, a.min, a.max, b.mean, b.std, b.min,
+                      b.max, static_cast<int>(units.size()), fitsec, warnings});
+    }
+  }
+}
+
+}  // namespace
+
+BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bool all_requested) {
+  auto log = [&](const std::string& s) {
+    if (o.log) o.log(s);
+  };
+  if (o.reps < 1) throw LearnerError("--reps must be >= 1");
+  const Dataset ds = read_dataset(o.data);
+  const Split& train_split = ds.get("train");
+  std::unique_ptr<ParametricModel> model;
+  std::string model_problem;
+  try {
+    model = make_parametric_model(ds, train_split, o.model);
+  } catch (const DatasetError& e) {
+    if (!o.model.empty()) throw;   // a model asked for explicitly must work
+    model_problem = e.what();
+  }
+
+  BenchReport report;
+  const std::vector<Selected> learners = select_learners(registry, o, model.get(), model_problem, all_requested, report);
+  check_config(registry, learners, o.config);
+
+  std::vector<Part> parts{make_part(train_split, train_split, o.train_max, model.get(), o.data)};
+  for (const Split& s : ds.splits)
+    if (s.name != "train" && s.name.rfind("test", 0) == 0)
+      parts.push_back(make_part(s, train_split, o.test_max, model.get(), o.data));
+  if (parts.size() < 2) throw LearnerError(o.data + ": no test split (a group named test*)");
+
+  LearnerModel lm;
+  if (model) {
+    lm.names = model->param_names;
+    lm.prior = model->prior;
+    lm.truth = model->truth;
+  }
+  const std::string dkey = data_key(parts, train_split, lm);
+
+  fs::create_directories(o.out);
+  remove_stale_temporaries(o.out, o.log);
+  // Provenance for people; reuse is decided per unit by its key.
+  nlohmann::json manifest{{"format", "spml-bench/2"}, {"data", fs::absolute(o.data).string()}, {"data_key", dkey},
+                          {"model", model ? model->name() : std::string()}, {"seed", o.seed}, {"reps", o.reps},
+                          {"train_max", o.train_max}, {"test_max", o.test_max}};
+  for (const auto& [k, v] : o.config.values) manifest["config"][k] = v;
+  write_text_atomic((fs::path(o.out) / "bench.json").string(), manifest.dump(2) + "\n");
+
+  const std::string scenario = scenario_name(ds, o.data);
+  std::ostringstream head;
+  head << scenario << ": train " << parts[0].rows.size() << " of " << train_split.rows() << " rows";
+  for (size_t i = 1; i < parts.size(); ++i) head << ", " << parts[i].name << " " << parts[i].rows.size() << " rows";
+  log(head.str());
+
+  std::vector<ResultRow> rows;
+  MatrixFile predictions;
+  predictions.attributes["format"] = "spml-predictions/1";
+  predictions.attributes["data"] = fs::absolute(o.data).string();
+  predictions.attributes["scenario"] = scenario;
+  for (size_t pi = 1; pi < parts.size(); ++pi) {
+    predictions.matrices[parts[pi].name + "/y"] = parts[pi].Y;
+    RowMatrix idx(static_cast<Eigen::Index>(parts[pi].rows.size()), 1);
+    for (size_t i = 0; i < parts[pi].rows.size(); ++i) idx(static_cast<Eigen::Index>(i), 0) = static_cast<double>(parts[pi].rows[i]);
+    predictions.matrices[parts[pi].name + "/rows"] = idx;
+  }
+
+  for (size_t li = 0; li < learners.size(); ++li) {
+    const std::string& name = learners[li].name;
+    const bool deterministic = learners[li].flags & SPML_LEARNER_DETERMINISTIC;
+    auto learner = registry.create(name);
+    const int fits = deterministic ? 1 : o.reps;
+    std::vector<MatrixFile> units;
+    for (int rep = 0; rep < fits; ++rep) {
+      LearnerConfig config = o.config;
+      config.seed = o.seed + static_cast<std::uint64_t>(rep);
+      const std::string path = unit_path(o.out, name, rep);
+      const std::string key = unit_key(dkey, registry, name, config, config.seed);
+      std::ostringstream tag;
+      tag << "[" << li + 1 << "/" << learners.size() << "] " << name << " rep " << rep + 1 << "/" << fits;
+      std::string why;
+      if (auto u = read_unit(path, key, &why)) {
+        ++report.units_cached;
+        log(tag.str() + ": done earlier");
+        units.push_back(std::move(*u));
+        continue;
+      }
+      log(tag.str() + (why.empty() ? "" : ": earlier unit " + why + "; refitting") + ": fitting on " +
+          std::to_string(parts[0].rows.size()) + " rows ...");
+      try {
+        std::string summary;
+        fit_unit(*learner, parts, lm, config, key, path, &summary);
+        units.push_back(read_matrix_file(path));
+        ++report.units_run;
+        log(tag.str() + ": " + summary + (learner->notes().empty() ? "" : "  [" + learner->notes() + "]"));
+      } catch (const std::exception& e) {
+        report.failed.push_back(name + ": " + e.what());
+        log(tag.str() + ": FAILED: " + e.what());
+        break;
+      }
+    }
+    if (static_cast<int>(units.size()) == fits) aggregate(scenario, name, deterministic, o.reps, units, parts, rows, predictions);
+  }
+
+  std::string csv = results_header() + "\n";
+  for (const auto& r : rows) csv += results_line(r) + "\n";
+  write_text_atomic((fs::path(o.out) / "results.csv").string(), csv);
+  write_matrix_file((fs::path(o.out) / "predictions.h5").string(), predictions);
+  return report;
+}
+
+}  // namespace spml

@@ -1,0 +1,105 @@
+#include "spml/learners/results.h"
+
+#include <cmath>
+#include <iomanip>
+#include <limits>
+#include <sstream>
+
+#include "spml/csv.h"
+#include "spml/dataset.h"
+#include "spml/parse.h"
+
+namespace spml {
+namespace {
+
+constexpr const char* kColumns[] = {"scenario", "split",   "output",  "algo",    "rmsemean", "rmsestd",
+                                    "rmsemin",  "rmsemax", "nllhmean", "nllhstd", "nllhmin",  "nllhmax",
+                                    "fits",     "fitsec",  "warnings"};
+
+std::string fmt(double v) {
+  if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
+  std::ostringstream s;
+  s << std::setprecision(6) << v;
+  return s.str();
+}
+
+double number(const std::string& text, const std::string& where, bool allow_missing) {
+  if (text == "inf") return std::numeric_limits<double>::infinity();
+  if (allow_missing && (text == "-" || text.empty())) return std::numeric_limits<double>::quiet_NaN();
+  const auto v = parse_number(text);
+  if (!v) throw DatasetError(where + ": '" + text + "' is not a number");
+  return *v;
+}
+
+std::vector<ResultRow> parse_rows(const std::string& path, bool published) {
+  const CsvText csv = read_csv(path);
+  auto required = [&](std::initializer_list<const char*> names) {
+    for (const char* n : names)
+      if (int c = csv.column(n); c >= 0) return static_cast<size_t>(c);
+    throw DatasetError(path + ": column '" + *names.begin() + "' is missing");
+  };
+  const size_t algo = required({"algo"});
+  const size_t cols[8] = {required({"rmsemean"}), required({"rmsestd"}), required({"rmsemin", "rmseamin"}),
+                          required({"rmsemax", "rmseamax"}), required({"nllhmean"}), required({"nllhstd"}),
+                          required({"nllhmin", "nllhamin"}), required({"nllhmax", "nllhamax"})};
+  size_t scenario = 0, split = 0, output = 0;
+  if (!published) {
+    scenario = required({"scenario"});
+    split = required({"split"});
+    output = required({"output"});
+  }
+  const int fits = csv.column("fits"), fitsec = csv.column("fitsec"), warnings = csv.column("warnings");
+  std::vector<ResultRow> out;
+  for (size_t i = 0; i < csv.rows.size(); ++i) {
+    const auto& r = csv.rows[i];
+    const std::string line = path + ": line " + std::to_string(csv.line[i]);
+    ResultRow row;
+    row.algo = canonical_algo(r[algo]);
+    double* fields[8] = {&row.rmse_mean, &row.rmse_std, &row.rmse_min, &row.rmse_max,
+                         &row.nllh_mean, &row.nllh_std, &row.nllh_min, &row.nllh_max};
+    for (int k = 0; k < 8; ++k) *fields[k] = number(r[cols[k]], line + " column '" + csv.header[cols[k]] + "'", published);
+    if (!published) {
+      row.scenario = r[scenario];
+      row.split = r[split];
+      const auto o = parse_integer(r[output], 0, 1 << 30);
+      if (!o) throw DatasetError(line + " column 'output': '" + r[output] + "' is not a whole number >= 0");
+      row.output = static_cast<int>(*o);
+      if (fits >= 0) row.fits = static_cast<int>(number(r[static_cast<size_t>(fits)], line + " column 'fits'", false));
+      if (fitsec >= 0) row.fit_seconds = number(r[static_cast<size_t>(fitsec)], line + " column 'fitsec'", false);
+      if (warnings >= 0) row.warnings = r[static_cast<size_t>(warnings)];
+    }
+    out.push_back(std::move(row));
+  }
+  return out;
+}
+
+}  // namespace
+
+std::string results_header() {
+  std::string h;
+  for (const char* c : kColumns) h += (h.empty() ? "" : ",") + std::string(c);
+  return h;
+}
+
+std::string results_line(const ResultRow& r) {
+  std::string warnings = r.warnings;
+  for (char& c : warnings)
+    if (c == ',') c = ';';
+    else if (c == '\n' || c == '\r') c = ' ';
+  std::ostringstream s;
+  s << r.scenario << "," << r.split << "," << r.output << "," << r.algo << "," << fmt(r.rmse_mean) << ","
+    << fmt(r.rmse_std) << "," << fmt(r.rmse_min) << "," << fmt(r.rmse_max) << "," << fmt(r.nllh_mean) << ","
+    << fmt(r.nllh_std) << "," << fmt(r.nllh_min) << "," << fmt(r.nllh_max) << "," << r.fits << ","
+    << fmt(r.fit_seconds) << "," << warnings;
+  return s.str();
+}
+
+std::vector<ResultRow> read_results(const std::string& path) { return parse_rows(path, false); }
+std::vector<ResultRow> read_published_table(const std::string& path) { return parse_rows(path, true); }
+
+std::string canonical_algo(const std::string& name) {
+  if (name == "SPGP-from-zeroes") return "SPGP-from-zeros";
+  return name;
+}
+
+}  // namespace spml

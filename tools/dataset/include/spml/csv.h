@@ -1,0 +1,23 @@
+// The one CSV reader of spml: a header row of names, then rows of text cells. Used by
+// `spml import` (cells then parsed as numbers) and by the results readers (bench, compare).
+#pragma once
+
+#include <string>
+#include <vector>
+
+namespace spml {
+
+struct CsvText {
+  std::string source;                          // file name, for messages
+  std::vector<std::string> header;
+  std::vector<std::vector<std::string>> rows;  // each as wide as the header
+  std::vector<size_t> line;                    // 1-based line number of each row
+  int column(const std::string& name) const;   // index or -1
+};
+
+// Throws DatasetError naming the file and line: not a text file (NUL bytes, an HDF5 or
+// other binary file), no header, an empty or repeated header name, a row of another width.
+// Blank lines are skipped; cells are trimmed of surrounding spaces.
+CsvText read_csv(const std::string& path);
+
+}  // namespace spml
