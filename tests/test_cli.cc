@@ -84,7 +84,7 @@ TEST(CliGenerate, H5pyReadsWhatSpmlWrites) {
 }
 
 TEST(CliGenerate, UnknownScenarioIsAnError) {
-  auto r = run(spml_bin() + " generate --scenario nope --out /tmp/x.h5");
+  auto r = run(spml_bin() + " generate --scenario nope --out " + (spml::test::temp_dir("cli-gen") / "x.h5").string());
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.output.find("nope"), std::string::npos) << r.output;
 }

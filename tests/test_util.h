@@ -5,14 +5,28 @@
 
 #include <array>
 #include <cstdio>
+#include <cstdlib>
+#include <vector>
 #include <filesystem>
 #include <string>
 
 namespace spml::test {
 
+// A fresh folder for this test process (its pid in the name), removed when the process
+// ends; set SPML_KEEP_TEST_FILES=1 to keep it for a look.
 inline std::filesystem::path temp_dir(const std::string& name) {
+  struct Cleanup {
+    std::vector<std::filesystem::path> dirs;
+    ~Cleanup() {
+      if (std::getenv("SPML_KEEP_TEST_FILES")) return;
+      std::error_code ec;
+      for (const auto& d : dirs) std::filesystem::remove_all(d, ec);
+    }
+  };
+  static Cleanup cleanup;
   auto dir = std::filesystem::temp_directory_path() / ("spml-test-" + name + "-" + std::to_string(::getpid()));
   std::filesystem::create_directories(dir);
+  cleanup.dirs.push_back(dir);
   return dir;
 }
 

@@ -1,0 +1,32 @@
+#!/usr/bin/env bash
+# Installs the whole of spml (binary, libraries, force and learner plugins, headers, MJCF
+# models, the paper's tables, the CMake package) into a temporary prefix, moves the prefix
+# elsewhere, and uses it with no SPML_* variables set: everything must be found relative to
+# the installed binary, and nothing may point back into the build or source tree.
+set -euo pipefail
+build_dir=$(cd "$1" && pwd) source_dir=$(cd "$2" && pwd)
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+cmake --install "$build_dir" --prefix "$work/prefix" >/dev/null
+mv "$work/prefix" "$work/moved"
+p="$work/moved"
+run() { env -u SPML_PLUGIN_PATH -u SPML_LEARNER_PATH -u SPML_MJCF_DIR -u SPML_SHARE_DIR "$@"; }
+for f in bin/spml include/spml/learner.h include/spml/force_plugin.h include/spml/abi.h \
+         share/spml/mjcf/planar_arm3_ll.xml share/spml/published/tables.csv lib/cmake/spml/spmlConfig.cmake; do
+  [ -e "$p/$f" ] || { echo "not installed: $f"; exit 1; }
+done
+listing=$(run "$p/bin/spml" learners; run "$p/bin/spml" plugins)
+echo "$listing" | grep -q "LLS" || { echo "no learners found:"; echo "$listing"; exit 1; }
+echo "$listing" | grep -q "friction_band" || { echo "no force plugins found:"; echo "$listing"; exit 1; }
+if echo "$listing" | grep -e "$build_dir" -e "$source_dir"; then echo "paths into the build/source tree"; exit 1; fi
+# SimDyn-Ll needs the shipped MJCF and the friction_band plugin; bench needs the learners
+# and, through compare, the paper's tables.
+run "$p/bin/spml" generate --scenario simdyn-ll --test-stride 50 --out "$work/arm.h5" --quiet >/dev/null
+run "$p/bin/spml" generate --scenario toy --out "$work/toy.h5" --quiet >/dev/null
+run "$p/bin/spml" bench --data "$work/toy.h5" --out "$work/bench" --learners LLS,GP --reps 1 2>/dev/null >/dev/null
+run "$p/bin/spml" compare --results "$work/bench/results.csv" | grep -q "toy_interp_w_noise.csv"
+# No RUNPATH or string in the installed binaries names the build tree.
+if grep -rl --binary-files=binary -F "$build_dir" "$p/bin" "$p/lib" 2>/dev/null; then
+  echo "installed files above still name the build tree $build_dir"; exit 1
+fi
+echo "installed, moved and used: OK"
