@@ -78,6 +78,16 @@ void require_outputs(const Split& s, const std::vector<std::string>& names, cons
                        " but Y has the columns " + join_list(s.y_columns));
 }
 
+void take_coefficients(ParametricModel& m, const Dataset& ds, int params, int outputs) {
+  if (ds.model.param_names.size() != static_cast<size_t>(params))
+    throw DatasetError("group 'model': '" + ds.model.name + "' has " + std::to_string(params) +
+                       " parameters, param_names lists " + std::to_string(ds.model.param_names.size()));
+  m.param_names = ds.model.param_names;
+  m.prior = ds.model.prior;
+  m.truth = ds.model.truth;
+  m.outputs = outputs;
+}
+
 bool register_parametric_model(const std::string& name, ParametricModelFactory factory) {
   factories()[name] = std::move(factory);
   return true;

@@ -152,13 +152,7 @@ class PlanarArm3Model : public RowwiseModel {
 const bool kArmRegistered = register_parametric_model("planar_arm3", [](const Dataset& ds, const Split& s) {
   require_outputs(s, {"tau:joint0", "tau:joint1", "tau:joint2"}, "planar_arm3");
   auto m = std::make_unique<PlanarArm3Model>(s);
-  m->param_names = ds.model.param_names;
-  m->prior = ds.model.prior;
-  m->truth = ds.model.truth;
-  if (m->param_names.size() != static_cast<size_t>(planar_arm3::kParams))
-    throw DatasetError("group 'model': 'planar_arm3' has 17 parameters, param_names lists " +
-                       std::to_string(m->param_names.size()));
-  m->outputs = 3;
+  take_coefficients(*m, ds, planar_arm3::kParams, 3);
   return std::unique_ptr<ParametricModel>(std::move(m));
 });
 }  // namespace

@@ -1,4 +1,5 @@
 #include "spml/envs/scenarios.h"
+#include "spml/version.h"
 
 #include <stdexcept>
 
@@ -23,7 +24,7 @@ Dataset generate_scenario(const std::string& name, const GenerateOptions& option
   }
   ds.provenance["scenario"] = name;
   ds.provenance["seed"] = std::to_string(options.seed);
-  ds.provenance["generator"] = "spml 0.1.0";
+  ds.provenance["generator"] = "spml " SPML_VERSION;
   ds.provenance["reference"] = "Riedel & Stulp, Comparing Semi-Parametric Model Learning Algorithms for Dynamic Model Estimation in Robotics";
   return ds;
 }

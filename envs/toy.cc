@@ -74,13 +74,7 @@ class ToyModel : public RowwiseModel {
 const bool kToyRegistered = register_parametric_model("toy", [](const Dataset& ds, const Split& s) {
   require_outputs(s, {"y"}, "toy");
   auto m = std::make_unique<ToyModel>(s);
-  constexpr int kM = 4;
-  m->param_names = ds.model.param_names;
-  m->prior = ds.model.prior;
-  m->truth = ds.model.truth;
-  if (m->param_names.size() != static_cast<size_t>(kM))
-    throw DatasetError("group 'model': 'toy' has 4 parameters, param_names lists " + std::to_string(m->param_names.size()));
-  m->outputs = 1;
+  take_coefficients(*m, ds, 4, 1);
   return std::unique_ptr<ParametricModel>(std::move(m));
 });
 }  // namespace

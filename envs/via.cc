@@ -141,13 +141,7 @@ class ViaModel : public RowwiseModel {
 const bool kViaRegistered = register_parametric_model("via", [](const Dataset& ds, const Split& s) {
   if (s.Y.cols() != 1) require_outputs(s, {"tau:link"}, "via");
   auto m = std::make_unique<ViaModel>(s);
-  constexpr int kM = 2;
-  m->param_names = ds.model.param_names;
-  m->prior = ds.model.prior;
-  m->truth = ds.model.truth;
-  if (m->param_names.size() != static_cast<size_t>(kM))
-    throw DatasetError("group 'model': 'via' has 2 parameters, param_names lists " + std::to_string(m->param_names.size()));
-  m->outputs = 1;
+  take_coefficients(*m, ds, 2, 1);
   return std::unique_ptr<ParametricModel>(std::move(m));
 });
 }  // namespace

@@ -241,7 +241,8 @@ double objective(unsigned n, const double* x, double* grad, void* data) {
   if (grad) {
     for (unsigned i = 0; i < n; ++i) grad[i] = g[i] * pr->scale[i];
   }
-  if (std::getenv("SPML_GP_TRACE")) {
+  static const bool trace = std::getenv("SPML_GP_TRACE") != nullptr;   // read once, not per evaluation
+  if (trace) {
     std::fprintf(stderr, "eval %d lml %.6g jit %.3g p", pr->evaluations, v, pr->lik->max_jitter());
     for (unsigned i = 0; i < std::min(n, 12u); ++i) std::fprintf(stderr, " %.3g", p[i]);
     std::fprintf(stderr, "\n");

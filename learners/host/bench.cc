@@ -196,10 +196,9 @@ void remove_stale_temporaries(const std::string& out, const std::function<void(c
     const std::string name = it->path().filename().string();
     const auto pos = name.rfind(".tmp-");
     if (pos == std::string::npos || !it->is_regular_file()) continue;
-    char* end = nullptr;
-    const long pid = std::strtol(name.c_str() + pos + 5, &end, 10);
-    if (*end != '\0' || pid <= 0) continue;
-    if (::kill(static_cast<pid_t>(pid), 0) == 0 || errno != ESRCH) continue;   // its writer still runs
+    const auto pid = parse_integer(name.substr(pos + 5), 1, 1LL << 31);
+    if (!pid) continue;
+    if (::kill(static_cast<pid_t>(*pid), 0) == 0 || errno != ESRCH) continue;   // its writer still runs
     std::error_code rm;
     fs::remove(it->path(), rm);
     if (log) log("removed " + it->path().string() + " (left by an interrupted run)");

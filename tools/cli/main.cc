@@ -5,7 +5,7 @@
 #include <new>
 
 #include "commands.h"
-#include "spml_version.h"
+#include "spml/version.h"
 
 namespace {
 

@@ -48,6 +48,10 @@ int require_column(const Split& s, const std::string& column, const std::string&
 // Throws unless the split's Y columns are exactly `names`, in this order.
 void require_outputs(const Split& s, const std::vector<std::string>& names, const std::string& model);
 
+// Takes the coefficient names, prior and truth of an analytic model from the dataset's
+// model group; throws unless it lists `params` names.
+void take_coefficients(ParametricModel& m, const Dataset& ds, int params, int outputs);
+
 // An analytic model's factory: wires it to the split's columns (throws DatasetError naming a
 // missing column) and fills names/prior/truth from the dataset.
 using ParametricModelFactory = std::function<std::unique_ptr<ParametricModel>(const Dataset&, const Split&)>;
