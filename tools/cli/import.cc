@@ -4,6 +4,7 @@
 
 #include "commands.h"
 #include "spml/import.h"
+#include "spml/parse.h"
 
 namespace spml::cli {
 
@@ -12,10 +13,18 @@ void add_import(CLI::App& app) {
   struct Args {
     std::string input, out, format = "auto";
     ImportSpec spec;
-    std::vector<std::string> splits;
+    std::vector<std::string> splits, text;
+    std::string lowpass = "0", order = "4", drop = "0", decimate = "1";
   };
   auto a = std::make_shared<Args>();
-  cmd->add_option("INPUT", a->input, "CSV or .mat file")->required();
+  cmd->add_option("INPUT", a->input, "CSV or .mat file (or none, with --text)");
+  cmd->add_option("--text", a->text, "a text log FILE=NAMES holding len(NAMES) values per sample, e.g. "
+                                     "pos.txt=q:joint{1..7} (repeatable; replaces INPUT)");
+  cmd->add_option("--lowpass", a->lowpass, "zero-phase Butterworth low-pass cut-off [Hz] on every column (0: none)");
+  cmd->add_option("--filter-order", a->order, "Butterworth order (even)")->capture_default_str();
+  cmd->add_flag("--derive", a->spec.conditioning.derive, "add qd:/qdd:<joint> by central differences of q:<joint>");
+  cmd->add_option("--drop-edges", a->drop, "samples dropped at each end after filtering/differentiation");
+  cmd->add_option("--decimate", a->decimate, "keep every K-th sample after filtering");
   cmd->add_option("--out,-o", a->out, "output spml/1 file")->required();
   cmd->add_option("--x", a->spec.x, "input columns: NAME, NEW=NAME or NEW=NAME*FACTOR (FACTOR: number or .mat scalar)")
       ->required()->delimiter(',');
@@ -25,13 +34,33 @@ void add_import(CLI::App& app) {
   cmd->add_option("--format", a->format, "input format")->check(CLI::IsMember({"auto", "csv", "mat"}));
   cmd->callback([a] {
     namespace fs = std::filesystem;
-    if (!fs::exists(a->input)) throw DatasetError(a->input + ": no such file");
-    if (fs::exists(a->out) && fs::equivalent(a->input, a->out))
-      throw DatasetError(a->out + ": is the input file; choose another --out (import never overwrites its input)");
+    std::vector<std::string> inputs;
+    if (!a->input.empty()) inputs.push_back(a->input);
+    for (const auto& t : a->text) inputs.push_back(t.substr(0, t.find('=')));
+    if (a->input.empty() == a->text.empty()) throw CLI::ValidationError("INPUT", "give either INPUT or --text logs");
+    for (const auto& in : inputs) {
+      if (!fs::exists(in)) throw DatasetError(in + ": no such file");
+      if (fs::exists(a->out) && fs::equivalent(in, a->out))
+        throw DatasetError(a->out + ": is an input file; choose another --out (import never overwrites its input)");
+    }
+    Conditioning& c = a->spec.conditioning;
+    const auto lowpass = parse_number(a->lowpass);
+    if (!lowpass || *lowpass < 0) throw CLI::ValidationError("--lowpass", "'" + a->lowpass + "' is not a cut-off >= 0 [Hz]");
+    const auto order = parse_integer(a->order, 2, 12), drop = parse_integer(a->drop, 0, 1000000000),
+               decimate = parse_integer(a->decimate, 1, 1000000);
+    if (!order || *order % 2) throw CLI::ValidationError("--filter-order", "'" + a->order + "' is not an even number in [2, 12]");
+    if (!drop) throw CLI::ValidationError("--drop-edges", "'" + a->drop + "' is not a whole number >= 0");
+    if (!decimate) throw CLI::ValidationError("--decimate", "'" + a->decimate + "' is not a whole number >= 1");
+    c.lowpass_hz = *lowpass;
+    c.filter_order = static_cast<int>(*order);
+    c.drop_edges = static_cast<int>(*drop);
+    c.decimate = static_cast<int>(*decimate);
     std::string fmt = a->format;
     if (fmt == "auto") fmt = std::filesystem::path(a->input).extension() == ".mat" ? "mat" : "csv";
-    Table table = fmt == "mat" ? read_mat_table(a->input) : read_csv_table(a->input);
+    Table table = !a->text.empty() ? read_text_logs(a->text) : fmt == "mat" ? read_mat_table(a->input) : read_csv_table(a->input);
     for (const auto& s : a->splits) a->spec.splits.push_back(parse_split_range(s));
+    a->spec.x = expand_names(join_list(a->spec.x));   // q:joint{1..7} -> q:joint1, ..., q:joint7
+    a->spec.y = expand_names(join_list(a->spec.y));
     Dataset ds = table_to_dataset(table, a->spec);
     write_dataset(a->out, ds);
     std::cout << "wrote " << a->out << ":";

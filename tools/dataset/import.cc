@@ -2,6 +2,7 @@
 
 #include "spml/csv.h"
 #include "spml/parse.h"
+#include "spml/signal.h"
 
 #include <matio.h>
 
@@ -173,16 +174,124 @@ SplitRange parse_split_range(const std::string& text) {
   return {parts[0], parts[1], parts[2]};
 }
 
+std::vector<std::string> expand_names(const std::string& list) {
+  std::vector<std::string> out;
+  for (const auto& item : split_list(list)) {
+    const auto open = item.find('{'), dots = item.find("..", open == std::string::npos ? 0 : open),
+               close = item.find('}', dots == std::string::npos ? 0 : dots);
+    if (open == std::string::npos || dots == std::string::npos || close == std::string::npos) {
+      out.push_back(item);
+      continue;
+    }
+    const auto a = parse_integer(item.substr(open + 1, dots - open - 1), -1000000, 1000000),
+               b = parse_integer(item.substr(dots + 2, close - dots - 2), -1000000, 1000000);
+    if (!a || !b || *b < *a || *b - *a > 10000) fail("'" + item + "': expected {first..last} with whole numbers");
+    for (long long k = *a; k <= *b; ++k)
+      out.push_back(item.substr(0, open) + std::to_string(k) + item.substr(close + 1));
+  }
+  return out;
+}
+
+Table read_text_logs(const std::vector<std::string>& specs) {
+  Table t;
+  for (const auto& spec : specs) {
+    const auto eq = spec.find('=');
+    if (eq == std::string::npos || eq == 0) fail("--text '" + spec + "': expected FILE=NAMES");
+    const std::string file = spec.substr(0, eq);
+    const std::vector<std::string> names = expand_names(spec.substr(eq + 1));
+    std::ifstream in(file, std::ios::binary);
+    if (!in) fail(file + ": cannot open");
+    std::vector<double> values;
+    std::string word;
+    while (in >> word) {
+      const auto v = parse_number(word);
+      if (!v) fail(file + ": value " + std::to_string(values.size() + 1) + ": '" + word + "' is not a finite number");
+      values.push_back(*v);
+    }
+    const size_t k = names.size();
+    if (values.empty() || values.size() % k != 0)
+      fail(file + ": " + std::to_string(values.size()) + " values are not a whole number of samples of " +
+           std::to_string(k) + " (" + join_list(names) + ")");
+    const auto n = static_cast<Eigen::Index>(values.size() / k);
+    if (t.rows() && n != t.rows())
+      fail(file + ": " + std::to_string(n) + " samples, but " + t.source + " has " + std::to_string(t.rows()));
+    for (size_t c = 0; c < k; ++c) {
+      Eigen::VectorXd col(n);
+      for (Eigen::Index i = 0; i < n; ++i) col[i] = values[static_cast<size_t>(i) * k + c];
+      if (std::find(t.names.begin(), t.names.end(), names[c]) != t.names.end()) fail(file + ": column '" + names[c] + "' named twice");
+      t.names.push_back(names[c]);
+      t.columns.push_back(std::move(col));
+    }
+    t.source = t.source.empty() ? file : t.source;
+  }
+  if (t.names.empty()) fail("no --text logs given");
+  return t;
+}
+
+namespace {
+
+// Steps 1-5 of Conditioning on the chosen columns (in place), with the time column.
+void condition(const Conditioning& c, const std::string& source, Eigen::VectorXd& t, std::vector<Eigen::VectorXd>& xs,
+               std::vector<std::string>& xn, std::vector<Eigen::VectorXd>& ys) {
+  if (!c.any()) return;
+  if (t.size() < 3) fail(source + ": filtering, differentiation, edge dropping and decimation need the time column (--t)");
+  for (Eigen::Index i = 1; i < t.size(); ++i)
+    if (!(t[i] > t[i - 1])) fail(source + ": time stamps must increase; row " + std::to_string(i) + " does not");
+  const double dt = median_step(t);
+  if (uneven_steps(t)) {
+    const auto n = static_cast<Eigen::Index>(std::floor((t[t.size() - 1] - t[0]) / dt)) + 1;
+    const Eigen::VectorXd grid = Eigen::VectorXd::LinSpaced(n, t[0], t[0] + dt * static_cast<double>(n - 1));
+    for (auto* cols : {&xs, &ys})
+      for (auto& col : *cols) col = interpolate(t, col, grid);
+    t = grid;
+  }
+  if (c.lowpass_hz > 0) {
+    const auto sos = butterworth_lowpass(c.filter_order, c.lowpass_hz, 1.0 / dt);
+    for (auto* cols : {&xs, &ys})
+      for (auto& col : *cols) col = filtfilt(sos, col);
+  }
+  if (c.derive) {
+    const size_t given = xn.size();
+    for (size_t j = 0; j < given; ++j) {
+      if (xn[j].rfind("q:", 0) != 0) continue;
+      const std::string joint = xn[j].substr(2);
+      const auto qd_it = std::find(xn.begin(), xn.end(), "qd:" + joint);
+      Eigen::VectorXd qd = qd_it != xn.end() ? xs[static_cast<size_t>(qd_it - xn.begin())] : central_difference(xs[j], dt);
+      if (qd_it == xn.end()) {
+        xs.push_back(qd);
+        xn.push_back("qd:" + joint);
+      }
+      if (std::find(xn.begin(), xn.end(), "qdd:" + joint) == xn.end()) {
+        xs.push_back(central_difference(qd, dt));
+        xn.push_back("qdd:" + joint);
+      }
+    }
+  }
+  const Eigen::Index n = t.size(), drop = c.drop_edges;
+  if (2 * drop >= n) fail(source + ": --drop-edges " + std::to_string(drop) + " leaves no rows of " + std::to_string(n));
+  auto keep = [&](Eigen::VectorXd& v) {
+    Eigen::VectorXd out((n - 2 * drop + c.decimate - 1) / c.decimate);
+    for (Eigen::Index i = 0; i < out.size(); ++i) out[i] = v[drop + i * c.decimate];
+    v = out;
+  };
+  keep(t);
+  for (auto* cols : {&xs, &ys})
+    for (auto& col : *cols) keep(col);
+}
+
+}  // namespace
+
 Dataset table_to_dataset(const Table& table, const ImportSpec& spec) {
   if (spec.x.empty() || spec.y.empty()) fail(table.source + ": choose at least one X and one Y column");
   Dataset ds;
-  const Eigen::Index N = table.rows();
   std::vector<Eigen::VectorXd> xs, ys;
   std::vector<std::string> xn, yn;
   for (const auto& s : spec.x) { std::string n; xs.push_back(resolve_column(table, s, n)); xn.push_back(n); }
   for (const auto& s : spec.y) { std::string n; ys.push_back(resolve_column(table, s, n)); yn.push_back(n); }
   Eigen::VectorXd tcol;
   if (!spec.t.empty()) { std::string n; tcol = resolve_column(table, spec.t, n); }
+  condition(spec.conditioning, table.source, tcol, xs, xn, ys);
+  const Eigen::Index N = xs.front().size();
   std::vector<SplitRange> ranges = spec.splits;
   if (ranges.empty()) ranges.push_back({"train", "", ""});
   std::vector<std::pair<Eigen::Index, Eigen::Index>> taken;

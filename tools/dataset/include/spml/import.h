@@ -19,6 +19,12 @@ struct Table {
 
 Table read_csv_table(const std::string& path);
 Table read_mat_table(const std::string& path);
+// Text logs of whitespace-separated numbers, each holding len(names) consecutive values per
+// sample (e.g. 7 joint positions): "FILE=NAMES" with NAMES comma-separated, "{a..b}"
+// expanded ("q:joint{1..7}"). Several logs become one table; their sample counts must agree.
+Table read_text_logs(const std::vector<std::string>& specs);
+// "q:joint{1..3}" -> q:joint1, q:joint2, q:joint3 (one brace group at most per name).
+std::vector<std::string> expand_names(const std::string& list);
 
 // A split of the imported rows: [begin, end). Bounds are given as row numbers or percentages
 // ("train:0:64%", "test:64%:", "all::").
@@ -30,10 +36,31 @@ SplitRange parse_split_range(const std::string& text);
 
 // Which columns become X, Y and t. Each entry is "source" or "name=source" or
 // "name=source*factor", where factor is a number or a scalar of the table.
+// Signal conditioning for measured data, applied in this order before the splits are cut
+// (all of it needs the time column):
+//   1. uneven time stamps (steps more than 1 % off their median): every column linearly
+//      interpolated onto a uniform grid with the median step;
+//   2. lowpass_hz > 0: zero-phase Butterworth low-pass (order `filter_order`, forward-backward)
+//      on every X and Y column;
+//   3. derive: for every X column q:<joint>, qd:<joint> by central differences of q unless
+//      X has it (measured velocities are kept, filtered), and qdd:<joint> by central
+//      differences of qd;
+//   4. drop_edges samples removed at each end (filter and difference transients);
+//   5. every decimate-th sample kept (the low-pass doubles as anti-aliasing filter).
+struct Conditioning {
+  double lowpass_hz = 0;
+  int filter_order = 4;
+  bool derive = false;
+  int drop_edges = 0;
+  int decimate = 1;
+  bool any() const { return lowpass_hz > 0 || derive || drop_edges > 0 || decimate > 1; }
+};
+
 struct ImportSpec {
   std::vector<std::string> x, y;
   std::string t;
   std::vector<SplitRange> splits;   // empty: a single split "train" with every row
+  Conditioning conditioning;
 };
 
 Dataset table_to_dataset(const Table& table, const ImportSpec& spec);

@@ -1,0 +1,31 @@
+// Conditioning measured signals before identification: uniform resampling of uneven time
+// stamps, a zero-phase Butterworth low-pass, central differences, edge trimming and
+// decimation - what `spml import --lowpass/--derive/--drop-edges/--decimate` applies.
+#pragma once
+
+#include <Eigen/Core>
+#include <vector>
+
+namespace spml {
+
+// Second-order sections of a digital Butterworth low-pass (bilinear transform with
+// pre-warping): `order` (even) poles, cut-off `cutoff_hz` at sampling rate `rate_hz`
+// (0 < cutoff < rate / 2). Each section: b0 b1 b2 a1 a2 (a0 = 1), unity gain at DC.
+std::vector<Eigen::Matrix<double, 5, 1>> butterworth_lowpass(int order, double cutoff_hz, double rate_hz);
+
+// Forward-backward (zero-phase) filtering with the sections above; the signal is extended
+// at both ends by odd reflection (3 * order samples, fewer for short signals) and every
+// section starts in its steady state for the first sample, so the ends do not ring.
+// The magnitude response is squared: -6 dB at the cut-off.
+Eigen::VectorXd filtfilt(const std::vector<Eigen::Matrix<double, 5, 1>>& sos, const Eigen::VectorXd& x);
+
+// Central differences (x[i+1] - x[i-1]) / (2 dt) inside, one-sided at the two ends.
+Eigen::VectorXd central_difference(const Eigen::VectorXd& x, double dt);
+
+// True when the steps of t differ from their median by more than 1 %.
+bool uneven_steps(const Eigen::VectorXd& t);
+double median_step(const Eigen::VectorXd& t);
+// Linear interpolation of (t, x) at the times `at` (t increasing, at within [t0, tN]).
+Eigen::VectorXd interpolate(const Eigen::VectorXd& t, const Eigen::VectorXd& x, const Eigen::VectorXd& at);
+
+}  // namespace spml

@@ -1,0 +1,102 @@
+#include "spml/signal.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace spml {
+
+using Section = Eigen::Matrix<double, 5, 1>;
+
+std::vector<Section> butterworth_lowpass(int order, double cutoff_hz, double rate_hz) {
+  if (order < 2 || order % 2) throw std::invalid_argument("Butterworth order must be even and >= 2");
+  if (!(cutoff_hz > 0 && cutoff_hz < 0.5 * rate_hz))
+    throw std::invalid_argument("low-pass cut-off must lie between 0 and half the sampling rate");
+  // Analog prototype poles in conjugate pairs; each pair is s^2 + 2 sin(theta) s + 1 in
+  // normalised frequency. Pre-warp the cut-off, then map s -> K (z - 1) / (z + 1).
+  const double K = 1.0 / std::tan(M_PI * cutoff_hz / rate_hz);   // = 2 fs / wc_warped, wc normalised to 1
+  std::vector<Section> sos;
+  for (int k = 0; k < order / 2; ++k) {
+    const double theta = M_PI * (2.0 * k + 1.0) / (2.0 * order);
+    const double c = 2.0 * std::sin(theta);   // s^2 + c s + 1
+    const double a0 = K * K + c * K + 1.0;
+    Section s;
+    s << 1.0 / a0, 2.0 / a0, 1.0 / a0, 2.0 * (1.0 - K * K) / a0, (K * K - c * K + 1.0) / a0;
+    sos.push_back(s);
+  }
+  return sos;
+}
+
+namespace {
+
+// One pass of the cascade in transposed direct form II, states started at the steady state
+// for a constant input equal to x[0] (every section has unity DC gain).
+void cascade(const std::vector<Section>& sos, std::vector<double>& x) {
+  if (x.empty()) return;
+  for (const Section& s : sos) {
+    const double u0 = x.front();
+    double z1 = u0 * (1.0 - s[0]) , z2 = u0 * (s[2] - s[4]);
+    for (double& v : x) {
+      const double u = v, y = s[0] * u + z1;
+      z1 = s[1] * u - s[3] * y + z2;
+      z2 = s[2] * u - s[4] * y;
+      v = y;
+    }
+  }
+}
+
+}  // namespace
+
+Eigen::VectorXd filtfilt(const std::vector<Section>& sos, const Eigen::VectorXd& x) {
+  const Eigen::Index n = x.size();
+  if (n < 2) return x;
+  const Eigen::Index pad = std::min<Eigen::Index>(n - 1, 3 * 2 * static_cast<Eigen::Index>(sos.size()));
+  std::vector<double> ext;
+  ext.reserve(static_cast<size_t>(n + 2 * pad));
+  for (Eigen::Index i = pad; i >= 1; --i) ext.push_back(2.0 * x[0] - x[i]);            // odd reflection
+  for (Eigen::Index i = 0; i < n; ++i) ext.push_back(x[i]);
+  for (Eigen::Index i = n - 2; i >= n - 1 - pad; --i) ext.push_back(2.0 * x[n - 1] - x[i]);
+  cascade(sos, ext);
+  std::reverse(ext.begin(), ext.end());
+  cascade(sos, ext);
+  std::reverse(ext.begin(), ext.end());
+  return Eigen::Map<const Eigen::VectorXd>(ext.data() + pad, n);
+}
+
+Eigen::VectorXd central_difference(const Eigen::VectorXd& x, double dt) {
+  const Eigen::Index n = x.size();
+  Eigen::VectorXd d = Eigen::VectorXd::Zero(n);
+  if (n < 2) return d;
+  for (Eigen::Index i = 1; i + 1 < n; ++i) d[i] = (x[i + 1] - x[i - 1]) / (2.0 * dt);
+  d[0] = (x[1] - x[0]) / dt;
+  d[n - 1] = (x[n - 1] - x[n - 2]) / dt;
+  return d;
+}
+
+double median_step(const Eigen::VectorXd& t) {
+  std::vector<double> steps;
+  for (Eigen::Index i = 1; i < t.size(); ++i) steps.push_back(t[i] - t[i - 1]);
+  if (steps.empty()) return 0;
+  std::nth_element(steps.begin(), steps.begin() + static_cast<long>(steps.size() / 2), steps.end());
+  return steps[steps.size() / 2];
+}
+
+bool uneven_steps(const Eigen::VectorXd& t) {
+  const double m = median_step(t);
+  for (Eigen::Index i = 1; i < t.size(); ++i)
+    if (std::fabs((t[i] - t[i - 1]) - m) > 0.01 * m) return true;
+  return false;
+}
+
+Eigen::VectorXd interpolate(const Eigen::VectorXd& t, const Eigen::VectorXd& x, const Eigen::VectorXd& at) {
+  Eigen::VectorXd out(at.size());
+  Eigen::Index k = 0;
+  for (Eigen::Index i = 0; i < at.size(); ++i) {
+    while (k + 2 < t.size() && t[k + 1] < at[i]) ++k;
+    const double w = (at[i] - t[k]) / (t[k + 1] - t[k]);
+    out[i] = x[k] + std::clamp(w, 0.0, 1.0) * (x[k + 1] - x[k]);
+  }
+  return out;
+}
+
+}  // namespace spml
