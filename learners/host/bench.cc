@@ -218,8 +218,9 @@ std::optional<MatrixFile> read_unit(const std::string& path, const std::string& 
   return std::nullopt;
 }
 
-void fit_unit(Learner& learner, const std::vector<Part>& parts, const LearnerModel& lm, const LearnerConfig& config,
-              const std::string& key, const std::string& path, std::string* summary) {
+// Fits, predicts every test part, writes the unit atomically and returns it.
+MatrixFile fit_unit(Learner& learner, const std::vector<Part>& parts, const LearnerModel& lm, const LearnerConfig& config,
+                    const std::string& key, const std::string& path, std::string* summary) {
   const auto t0 = std::chrono::steady_clock::now();
   learner.fit(parts.front().data(true), lm, config);
   const auto t1 = std::chrono::steady_clock::now();
@@ -228,10 +229,8 @@ void fit_unit(Learner& learner, const std::vector<Part>& parts, const LearnerMod
   for (size_t pi = 1; pi < parts.size(); ++pi) {
     LearnerPrediction pred = learner.predict(parts[pi].data(false));
     if (!pred.mean.allFinite()) throw LearnerError(learner.name() + ": non-finite predictive mean on " + parts[pi].name);
-    if (pred.var.size() && !(pred.var.array() > 0).all() && pred.var.allFinite())
-      throw LearnerError(learner.name() + ": predictive variance not positive on " + parts[pi].name);
-    if (pred.var.size() && !pred.var.allFinite())
-      throw LearnerError(learner.name() + ": non-finite predictive variance on " + parts[pi].name);
+    if (pred.var.size() && !(pred.var.allFinite() && (pred.var.array() > 0).all()))
+      throw LearnerError(learner.name() + ": predictive variance not positive and finite on " + parts[pi].name);
     unit.matrices[parts[pi].name + "/mean"] = pred.mean;
     if (pred.var.size()) unit.matrices[parts[pi].name + "/var"] = pred.var;
     const Scores sc = score(parts[pi].Y, pred);
@@ -249,6 +248,7 @@ void fit_unit(Learner& learner, const std::vector<Part>& parts, const LearnerMod
   fs::create_directories(fs::path(path).parent_path());
   write_matrix_file(path, unit);
   *summary = unit.attributes["fit_seconds"] + " s;" + line.str();
+  return unit;
 }
 
 // results.csv rows and predictions of one learner from its units (all repetitions present).
@@ -377,8 +377,7 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bo
           std::to_string(parts[0].rows.size()) + " rows ...");
       try {
         std::string summary;
-        fit_unit(*learner, parts, lm, config, key, path, &summary);
-        units.push_back(read_matrix_file(path));
+        units.push_back(fit_unit(*learner, parts, lm, config, key, path, &summary));
         ++report.units_run;
         log(tag.str() + ": " + summary + (learner->notes().empty() ? "" : "  [" + learner->notes() + "]"));
       } catch (const std::exception& e) {
