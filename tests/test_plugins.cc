@@ -87,6 +87,14 @@ TEST(ForcePlugins, ClosedForms) {
   double q = 0.123;
   EXPECT_NEAR(r.force(q, 0, 0, 0)[0], 6 * std::sin(60 * q + 0.3) + 2 * std::sin(240 * q), 1e-12);
   r.expect_regressor_consistent(q, 0, 0, 0);
+
+  // Each direction has its own Coulomb and viscous level; at rest there is no force.
+  Loaded a(decl("wear", "type=asymmetric_friction joints=a,b fc_pos=20 fc_neg=21 fv_pos=160 fv_neg=240"));
+  EXPECT_NEAR(a.force(0, 0, 0.1, -0.1)[0], -20 - 16, 1e-12);
+  EXPECT_NEAR(a.force(0, 0, 0.1, -0.1)[1], 21 + 24, 1e-12);
+  EXPECT_EQ(a.force(0, 0, 0, 0), Eigen::Vector2d(0, 0));
+  a.expect_regressor_consistent(0, 0, 0.1, -0.1);
+  EXPECT_EQ(a.fx->param_names().size(), 8u);
 }
 
 TEST(ForcePlugins, FrictionBandActsOnlyInsideItsInterval) {
@@ -169,7 +177,7 @@ TEST(ForcePlugins, BadDeclarationsNameTheElement) {
   const std::string el = "<custom><text name=\"spml.plugin.x\">";
   struct Case { std::string data, message; };
   std::vector<Case> cases = {
-      {"type=no_such_plugin joints=a", "unknown force plugin 'no_such_plugin' (available: coulomb, friction_band, offset, ripple, stick_slip, stribeck, viscous"},
+      {"type=no_such_plugin joints=a", "unknown force plugin 'no_such_plugin' (available: asymmetric_friction, coulomb, friction_band, offset, ripple, stick_slip, stribeck, viscous"},
       {"type=coulomb joints=a fc=1 lvl=2", "unknown key 'lvl' for plugin 'coulomb' (accepted: type, joints, fc, smooth)"},
       {"type=coulomb joints=a fc=abc", "plugin 'coulomb': key 'fc': 'abc' is not a comma-separated list of finite numbers"},
       {"type=coulomb joints=a", "plugin 'coulomb': missing required key 'fc'"},
