@@ -245,9 +245,9 @@ JointColumns::JointColumns(const MjcfRegressor& reg, const Split& s) {
   }
 }
 
-Eigen::MatrixXd stacked_base_regressor(const MjcfRegressor& reg, const MjcfRegressor::Base& base, const Split& s,
-                                       const JointColumns& cols) {
-  const Eigen::Index N = s.rows();
+Eigen::MatrixXd stacked_base_regressor(const MjcfRegressor& reg, const MjcfRegressor::Base& base, const RowMatrix& X,
+                                       const JointColumns& cols, const std::string& where) {
+  const Eigen::Index N = X.rows();
   const auto O = static_cast<Eigen::Index>(cols.output_dof.size());
   const auto J = cols.q.size();
   Eigen::MatrixXd A(N * O, base.rank);
@@ -255,13 +255,13 @@ Eigen::MatrixXd stacked_base_regressor(const MjcfRegressor& reg, const MjcfRegre
   auto ws = reg.workspace();
   for (Eigen::Index r = 0; r < N; ++r) {
     for (size_t j = 0; j < J; ++j) {
-      q[j] = s.X(r, cols.q[j]);
-      qd[j] = s.X(r, cols.qd[j]);
-      qdd[j] = s.X(r, cols.qdd[j]);
+      q[j] = X(r, cols.q[j]);
+      qd[j] = X(r, cols.qd[j]);
+      qdd[j] = X(r, cols.qdd[j]);
     }
     const Eigen::MatrixXd Y = base.Y_base(reg.evaluate(ws, q, qd, qdd));
     if (!Y.allFinite())
-      throw DatasetError("split '" + s.name + "' row " + std::to_string(r) +
+      throw DatasetError("split '" + where + "' row " + std::to_string(r) +
                          ": the regressor is not finite there (a value too large for the model's dynamics?)");
     for (Eigen::Index o = 0; o < O; ++o) A.row(o * N + r) = Y.row(cols.output_dof[static_cast<size_t>(o)]);
   }
@@ -273,7 +273,7 @@ Identification identify(const MjcfRegressor& reg, const MjcfRegressor::Base& bas
   auto stack = [&](const Split& s, Eigen::MatrixXd& A, Eigen::VectorXd& b) {
     try {
       const JointColumns cols(reg, s);
-      A = stacked_base_regressor(reg, base, s, cols);
+      A = stacked_base_regressor(reg, base, s.X, cols, s.name);
     } catch (const DatasetError& e) {
       throw DatasetError((ds.source.empty() ? "" : ds.source + ": ") + e.what());
     }

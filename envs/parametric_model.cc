@@ -23,24 +23,23 @@ std::map<std::string, ParametricModelFactory>& factories() {
 // Any MJCF through its identification regressor, on base parameters.
 class MjcfModel : public ParametricModel {
  public:
-  MjcfModel(const std::string& file, const Dataset& ds, const Split& layout)
-      : file_(file), reg_(file), base_(reg_.base_parameters()), cols_(reg_, layout) {
+  // `label` names the model in messages and bench.json (the file, or where inline XML came from).
+  MjcfModel(const std::string& file, const std::string& label, const Dataset& ds, const Split& layout)
+      : label_(label), reg_(file), base_(reg_.base_parameters()), cols_(reg_, layout) {
     param_names = base_.names;
     prior = base_.model_values;
     outputs = static_cast<int>(layout.Y.cols());
     // The dataset's truth applies when it is stated in these same parameters.
     if (ds.model.param_names == param_names && ds.model.truth.size() == num_params()) truth = ds.model.truth;
   }
-  std::string name() const override { return "mjcf:" + file_; }
+  std::string name() const override { return "mjcf:" + label_; }
   Eigen::MatrixXd stacked(const RowMatrix& X) const override {
-    Split s;
-    s.name = "(query)";
-    s.X = X;
-    return stacked_base_regressor(reg_, base_, s, cols_);
+    // X may come from any split laid out like `layout`; it is not named here.
+    return stacked_base_regressor(reg_, base_, X, cols_, "(query)");
   }
 
  private:
-  std::string file_;
+  std::string label_;
   MjcfRegressor reg_;
   MjcfRegressor::Base base_;
   JointColumns cols_;
@@ -116,7 +115,7 @@ std::unique_ptr<ParametricModel> make_parametric_model(const Dataset& ds, const 
   const std::string where = ds.source.empty() ? std::string("dataset") : ds.source;
   try {
     if (!mjcf_override.empty()) {
-      model = std::make_unique<MjcfModel>(mjcf_override, ds, layout);
+      model = std::make_unique<MjcfModel>(mjcf_override, mjcf_override, ds, layout);
     } else if (auto it = factories().find(ds.model.name); !ds.model.name.empty() && it != factories().end()) {
       model = it->second(ds, layout);
     } else if (!ds.model.mjcf_xml.empty()) {
@@ -124,14 +123,15 @@ std::unique_ptr<ParametricModel> make_parametric_model(const Dataset& ds, const 
       const fs::path tmp = fs::temp_directory_path() / ("spml-model-" + std::to_string(::getpid()) + ".xml");
       write_text_atomic(tmp.string(), ds.model.mjcf_xml);
       try {
-        model = std::make_unique<MjcfModel>(tmp.string(), ds, layout);
+        model = std::make_unique<MjcfModel>(tmp.string(), where + ":model/mjcf_xml", ds, layout);
       } catch (...) {
         fs::remove(tmp);
         throw;
       }
       fs::remove(tmp);
     } else if (!ds.model.mjcf_path.empty()) {
-      model = std::make_unique<MjcfModel>(resolve_mjcf_path(ds.model.mjcf_path, where), ds, layout);
+      const std::string file = resolve_mjcf_path(ds.model.mjcf_path, where);
+      model = std::make_unique<MjcfModel>(file, file, ds, layout);
     } else if (!ds.model.name.empty()) {
       std::string known;
       for (const auto& [n, f] : factories()) known += (known.empty() ? "" : ", ") + n;

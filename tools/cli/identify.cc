@@ -12,15 +12,24 @@ namespace {
 
 std::vector<double> vec(const Eigen::VectorXd& v) { return {v.data(), v.data() + v.size()}; }
 
+// The options both commands take: the model, its optional offset columns, JSON output.
+struct ModelArgs {
+  std::string model;
+  bool json = false, offsets = false;
+};
+void add_model_options(CLI::App* cmd, ModelArgs& a, const std::string& model_help) {
+  cmd->add_option("--model,-m", a.model, model_help)->required();
+  cmd->add_flag("--json", a.json, "print JSON");
+  cmd->add_flag("--offsets", a.offsets, "add a constant-torque parameter per joint");
+}
+
 }  // namespace
 
 void add_regressor(CLI::App& app) {
   auto* cmd = app.add_subcommand("regressor", "Base parameters of an MJCF model's identification regressor");
-  struct Args { std::string model; bool json = false, offsets = false, bench = false; };
+  struct Args : ModelArgs { bool bench = false; };
   auto a = std::make_shared<Args>();
-  cmd->add_option("--model,-m", a->model, "MJCF file (hinge/slide joints)")->required();
-  cmd->add_flag("--json", a->json, "print JSON");
-  cmd->add_flag("--offsets", a->offsets, "add a constant-torque parameter per joint");
+  add_model_options(cmd, *a, "MJCF file (hinge/slide joints)");
   cmd->add_flag("--benchmark", a->bench, "also time regressor evaluation (rows per second)");
   cmd->callback([a] {
     MjcfRegressor reg(a->model, RegressorOptions{a->offsets});
@@ -49,13 +58,11 @@ void add_regressor(CLI::App& app) {
 
 void add_identify(CLI::App& app) {
   auto* cmd = app.add_subcommand("identify", "Least-squares identification of an MJCF model's base parameters on a dataset");
-  struct Args { std::string model, data, split = "train"; bool json = false, offsets = false; };
+  struct Args : ModelArgs { std::string data, split = "train"; };
   auto a = std::make_shared<Args>();
-  cmd->add_option("--model,-m", a->model, "MJCF file")->required();
+  add_model_options(cmd, *a, "MJCF file");
   cmd->add_option("--data,-d", a->data, "spml/1 dataset with q:/qd:/qdd:<joint> inputs and tau:<joint> targets")->required();
   cmd->add_option("--split", a->split, "split to identify on; every other split is scored as held out");
-  cmd->add_flag("--offsets", a->offsets, "add a constant-torque parameter per joint");
-  cmd->add_flag("--json", a->json, "print JSON");
   cmd->callback([a] {
     MjcfRegressor reg(a->model, RegressorOptions{a->offsets});
     auto base = reg.base_parameters();

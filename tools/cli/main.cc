@@ -34,11 +34,7 @@ int main(int argc, char** argv) {
   spml::cli::add_plugins(app);
   try {
     app.parse(argc, argv);
-  } catch (const CLI::CallForHelp& e) {
-    return app.exit(e);
-  } catch (const CLI::CallForAllHelp& e) {
-    return app.exit(e);
-  } catch (const CLI::CallForVersion& e) {
+  } catch (const CLI::Success& e) {   // --help, --help-all, --version
     return app.exit(e);
   } catch (const CLI::ParseError& e) {
     return fail(std::string(e.what()) + " (see spml " + (argc > 1 ? std::string(argv[1]) + " " : "") + "--help)", 2);

@@ -168,10 +168,11 @@ std::string check_config_value(const spml_config_key& key, const std::string& va
       return v ? bounds(*v) : "'" + value + "' is not a finite number";
     }
     case SPML_VALUE_INTEGER: {
-      const auto v = parse_integer(value, static_cast<long long>(std::max(key.min, -9.2e18)),
-                                   static_cast<long long>(std::min(key.max, 9.2e18)));
-      return v ? "" : "'" + value + "' is not a whole number in [" + std::to_string(static_cast<long long>(std::max(key.min, -9.2e18))) +
-                          ", " + std::to_string(static_cast<long long>(std::min(key.max, 9.2e18))) + "]";
+      // Bounds clamped to what a long long holds (the table may say +-HUGE_VAL).
+      const auto lo = static_cast<long long>(std::max(key.min, -9.2e18)), hi = static_cast<long long>(std::min(key.max, 9.2e18));
+      return parse_integer(value, lo, hi) ? ""
+                                          : "'" + value + "' is not a whole number in [" + std::to_string(lo) + ", " +
+                                                std::to_string(hi) + "]";
     }
     case SPML_VALUE_NUMBERS: {
       const auto v = parse_numbers(value);

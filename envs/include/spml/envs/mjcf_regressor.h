@@ -81,10 +81,11 @@ struct JointColumns {
   JointColumns(const MjcfRegressor& reg, const Split& s);
 };
 
-// The stacked base regressor (rows output-major: o * N + i, outputs = the split's Y
-// columns) of a split. Throws DatasetError naming the row when a value makes it non-finite.
-Eigen::MatrixXd stacked_base_regressor(const MjcfRegressor& reg, const MjcfRegressor::Base& base, const Split& s,
-                                       const JointColumns& cols);
+// The stacked base regressor (rows output-major: o * N + i, outputs = the Y columns `cols`
+// was made for) of inputs X laid out like that split. Throws DatasetError naming the split
+// (`where`) and row when a value makes it non-finite.
+Eigen::MatrixXd stacked_base_regressor(const MjcfRegressor& reg, const MjcfRegressor::Base& base, const RowMatrix& X,
+                                       const JointColumns& cols, const std::string& where);
 
 // Least-squares identification of base parameters on one split of a dataset whose X has
 // q:/qd:/qdd:<joint> and whose Y has tau:<joint> for every joint of the model.
