@@ -81,7 +81,8 @@ MjcfRegressor::MjcfRegressor(const std::string& mjcf_file, const RegressorOption
     int dof = m->jnt_dofadr[j];
     names_.push_back("armature:" + joints_[j]); values.push_back(m->dof_armature[dof]);
     names_.push_back("damping:" + joints_[j]);  values.push_back(m->dof_damping[dof]);
-    names_.push_back("coulomb:" + joints_[j]);  values.push_back(m->dof_frictionloss[dof]);
+    coulomb_.push_back(!options_.coulomb_only_where_modelled || m->dof_frictionloss[dof] != 0);
+    if (coulomb_.back()) { names_.push_back("coulomb:" + joints_[j]);  values.push_back(m->dof_frictionloss[dof]); }
     if (options_.offsets) { names_.push_back("offset:" + joints_[j]); values.push_back(0.0); }
   }
   for (int j = 0; j < m->njnt; ++j)
@@ -152,7 +153,7 @@ Eigen::MatrixXd MjcfRegressor::evaluate(Workspace& ws, const Eigen::VectorXd& q,
     int dof = m->jnt_dofadr[j];
     Y(dof, col++) = qdd[j];
     Y(dof, col++) = qd[j];
-    Y(dof, col++) = qd[j] > 0 ? 1.0 : (qd[j] < 0 ? -1.0 : 0.0);
+    if (coulomb_[j]) Y(dof, col++) = qd[j] > 0 ? 1.0 : (qd[j] < 0 ? -1.0 : 0.0);
     if (options_.offsets) Y(dof, col++) = 1.0;
   }
   for (int j : stiff_joints_) Y(m->jnt_dofadr[j], col++) = q[j] - m->qpos_spring[m->jnt_qposadr[j]];

@@ -199,5 +199,5 @@ TEST(ForcePlugins, AbiMismatchIsRejected) {
   setenv("SPML_PLUGIN_PATH", SPML_TEST_PLUGIN_DIR, 1);
   std::string err = error_of(decl("w", "type=wrong_abi joints=a"));
   unsetenv("SPML_PLUGIN_PATH");
-  EXPECT_NE(err.find("spml_force_wrong_abi.so: force plugin ABI version 99, this spml speaks version 2"), std::string::npos) << err;
+  EXPECT_NE(err.find("spml_force_wrong_abi.so: force plugin ABI version 99, this spml speaks version 3"), std::string::npos) << err;
 }

@@ -10,6 +10,7 @@ packages=(
   libeigen3-dev libnlopt-cxx-dev
   libhdf5-dev libmatio-dev
   libsvm-dev libcli11-dev nlohmann-json3-dev
+  libtinyxml2-dev                      # editing MJCF files (spml diagnose writes the extended model)
   libopenblas-dev                      # LAPACK for the GP learners
   libgtest-dev libgmock-dev libbenchmark-dev
   python3-h5py python3-numpy python3-scipy python3-sklearn python3-matplotlib

@@ -38,6 +38,10 @@ struct AsymmetricFriction {
       if (v < 0) row[1] = 1.0, row[3] = -v;
     }
   }
+  std::string config() const {
+    return "fc_pos=" + exact_list(every(theta, 0, 4)) + " fc_neg=" + exact_list(every(theta, 1, 4)) +
+           " fv_pos=" + exact_list(every(theta, 2, 4)) + " fv_neg=" + exact_list(every(theta, 3, 4));
+  }
   void compute(const mjModel* m, const mjData* d, mjtNum* qfrc) const { compute_linear(*this, m, d, qfrc); }
 
   std::vector<Joint> joints;

@@ -7,6 +7,7 @@
 //   explicit Effect(const EffectConfig&)            (throws std::invalid_argument on bad values)
 //   void compute(const mjModel*, const mjData*, mjtNum* qfrc) const
 //   std::vector<std::string> names; std::vector<double> theta;   (the parameter vector)
+//   std::string config() const    (key=value words recreating it with the current theta)
 // and optionally
 //   static constexpr bool kLinear = true; void regressor(const mjModel*, const mjtNum* qpos, const mjtNum* qvel, mjtNum* R) const
 //   static constexpr bool kStateful = true; void advance(const mjModel*, const mjData*, mjtNum dt); void reset()
@@ -18,6 +19,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <charconv>
 #include <cstdlib>
 #include <stdexcept>
 #include <string>
@@ -79,6 +81,24 @@ class EffectConfig {
   std::vector<std::pair<std::string, std::string>> kv_;
 };
 
+// Shortest text that reads back to the same double, and comma-joined lists of such.
+inline std::string exact(double v) {
+  char buf[32];
+  auto r = std::to_chars(buf, buf + sizeof buf, v);
+  return std::string(buf, r.ptr);
+}
+inline std::string exact_list(const std::vector<double>& v) {
+  std::string out;
+  for (size_t i = 0; i < v.size(); ++i) out += (i ? "," : "") + exact(v[i]);
+  return out;
+}
+// Every stride-th entry of theta starting at first: one parameter across joints.
+inline std::vector<double> every(const std::vector<double>& theta, size_t first, size_t stride) {
+  std::vector<double> out;
+  for (size_t i = first; i < theta.size(); i += stride) out.push_back(theta[i]);
+  return out;
+}
+
 inline void require(bool ok, const std::string& what) {
   if (!ok) throw std::invalid_argument(what);
 }
@@ -138,6 +158,10 @@ const spml_force_plugin* make_descriptor() {
       };
     }
     if constexpr (has_shape<E>::value) p.shape_params = E::kShape;
+    p.write_config = [](const void* inst, char* buf, size_t size) -> int32_t {
+      const std::string text = static_cast<const E*>(inst)->config();
+      return static_cast<int32_t>(std::snprintf(buf, size, "%s", text.c_str()));
+    };
     return p;
   }();
   return &d;

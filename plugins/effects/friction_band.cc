@@ -35,6 +35,9 @@ struct FrictionBand {
     for (size_t i = 0; i < joints.size(); ++i)
       if (inside(qpos[joints[i].qpos])) R[joints[i].dof * np + i] = -smooth_sign(qvel[joints[i].dof], smooth);
   }
+  std::string config() const {
+    return "lower=" + exact(lower) + " upper=" + exact(upper) + " level=" + exact_list(theta) + " smooth=" + exact(smooth);
+  }
   void compute(const mjModel* m, const mjData* d, mjtNum* qfrc) const { compute_linear(*this, m, d, qfrc); }
 
   std::vector<Joint> joints;

@@ -12,24 +12,44 @@ struct Ripple {
   static constexpr spml_config_key kKeys[] = {
       {"gear", SPML_VALUE_NUMBER, 1e-12, HUGE_VAL, nullptr, "ripple periods per radian (gear ratio)"},
       {"harmonics", SPML_VALUE_NUMBERS, 1, 1000, nullptr, "harmonic orders, e.g. 1,2"},
-      {"amplitudes", SPML_VALUE_NUMBERS, -HUGE_VAL, HUGE_VAL, nullptr, "amplitude per harmonic"},
-      {"phases", SPML_VALUE_NUMBERS, -HUGE_VAL, HUGE_VAL, "0", "phase per harmonic [rad]"},
+      {"amplitudes", SPML_VALUE_NUMBERS, -HUGE_VAL, HUGE_VAL, nullptr, "amplitude per harmonic (or per harmonic and joint)"},
+      {"phases", SPML_VALUE_NUMBERS, -HUGE_VAL, HUGE_VAL, "0", "phase per harmonic (or per harmonic and joint) [rad]"},
       {nullptr, 0, 0, 0, nullptr, nullptr}};
   static constexpr spml_shape_param kShape[] = {{"gear", SPML_SHAPE_ABSOLUTE, 1, 200, 0, 1}, {nullptr, 0, 0, 0, 0, 0}};
   static constexpr bool kLinear = true;
 
   explicit Ripple(const EffectConfig& c) : joints(c.joints), gear(c.number("gear")), harmonics(c.list("harmonics")) {
     require(gear > 0, "gear must be > 0");
-    auto amp = c.list("amplitudes", harmonics.size());
-    auto phase = c.has("phases") ? c.list("phases", harmonics.size()) : std::vector<double>(harmonics.size(), 0.0);
-    for (auto& j : joints)
-      for (size_t h = 0; h < harmonics.size(); ++h) {
-        std::string base = j.name + ".h" + std::to_string(static_cast<long>(harmonics[h]));
-        theta.push_back(amp[h] * std::cos(phase[h]));
+    // One value per harmonic (shared by all joints), or one per harmonic and joint (joint-major).
+    const size_t H = harmonics.size(), J = joints.size();
+    auto per_joint_harmonic = [&](const std::string& key, double fallback) {
+      std::vector<double> v = c.has(key) ? c.list(key) : std::vector<double>(H, fallback);
+      if (v.size() == 1) v.assign(H, v[0]);
+      require(v.size() == H || v.size() == H * J, "key '" + key + "': expected " + std::to_string(H) + " (one per harmonic) or " +
+                                                   std::to_string(H * J) + " (per harmonic and joint) values, got " +
+                                                   std::to_string(v.size()));
+      if (v.size() == H) for (size_t j = 1; j < J; ++j) v.insert(v.end(), v.begin(), v.begin() + static_cast<long>(H));
+      return v;
+    };
+    auto amp = per_joint_harmonic("amplitudes", 0.0), phase = per_joint_harmonic("phases", 0.0);
+    for (size_t j = 0; j < J; ++j)
+      for (size_t h = 0; h < H; ++h) {
+        std::string base = joints[j].name + ".h" + std::to_string(static_cast<long>(harmonics[h]));
+        theta.push_back(amp[j * H + h] * std::cos(phase[j * H + h]));
         names.push_back(base + ".sin");
-        theta.push_back(amp[h] * std::sin(phase[h]));
+        theta.push_back(amp[j * H + h] * std::sin(phase[j * H + h]));
         names.push_back(base + ".cos");
       }
+  }
+  // theta holds (a cos phi, a sin phi) pairs; written back as amplitudes and phases per joint.
+  std::string config() const {
+    std::vector<double> amp, phase;
+    for (size_t i = 0; i + 1 < theta.size(); i += 2) {
+      amp.push_back(std::hypot(theta[i], theta[i + 1]));
+      phase.push_back(std::atan2(theta[i + 1], theta[i]));
+    }
+    return "gear=" + exact(gear) + " harmonics=" + exact_list(harmonics) + " amplitudes=" + exact_list(amp) +
+           " phases=" + exact_list(phase);
   }
   void regressor(const mjModel*, const mjtNum* qpos, const mjtNum*, mjtNum* R) const {
     const int np = static_cast<int>(theta.size());

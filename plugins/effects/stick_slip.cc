@@ -39,6 +39,12 @@ struct StickSlip {
     const double* q = p(i);
     return q[0] + (q[1] - q[0]) * std::exp(-(v / q[2]) * (v / q[2]));
   }
+  std::string config() const {
+    static const char* keys[] = {"fc", "fs", "vs", "sigma0", "sigma1", "sigma2"};
+    std::string out;
+    for (size_t k = 0; k < 6; ++k) out += std::string(k ? " " : "") + keys[k] + "=" + exact_list(every(theta, k, 6));
+    return out;
+  }
   void compute(const mjModel*, const mjData* d, mjtNum* qfrc) const {
     for (size_t i = 0; i < joints.size(); ++i) {
       const double* q = p(i);

@@ -35,6 +35,10 @@ struct Stribeck {
       R[joints[i].dof * np + 2 * i + 1] = -s * e;
     }
   }
+  std::string config() const {
+    return "fc=" + exact_list(every(theta, 0, 2)) + " fs=" + exact_list(every(theta, 1, 2)) + " vs=" + exact_list(vs) +
+           " smooth=" + exact(smooth);
+  }
   void compute(const mjModel* m, const mjData* d, mjtNum* qfrc) const { compute_linear(*this, m, d, qfrc); }
 
   std::vector<Joint> joints;

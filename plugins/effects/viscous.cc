@@ -19,6 +19,7 @@ struct Viscous {
     const int np = static_cast<int>(theta.size());
     for (int i = 0; i < np; ++i) R[joints[i].dof * np + i] = -qvel[joints[i].dof];
   }
+  std::string config() const { return "fv=" + exact_list(theta); }
   void compute(const mjModel* m, const mjData* d, mjtNum* qfrc) const { compute_linear(*this, m, d, qfrc); }
 
   std::vector<Joint> joints;

@@ -110,40 +110,87 @@ const spml_force_plugin& load_force_plugin(const std::string& type, const std::s
   throw PluginError((element.empty() ? "" : element + ": ") + catalog.unknown(type));
 }
 
+namespace {
+
+// Checks a configuration against the plugin's key table, fills in defaults and creates the
+// instance; the one path for declarations and for instances made by tools.
+void* create_checked(const spml_force_plugin& p, const mjModel* m, const std::vector<int>& joints,
+                     const std::vector<std::pair<std::string, std::string>>& given, const std::string& where) {
+  const std::string plugin = "plugin '" + std::string(p.name) + "'";
+  std::vector<std::pair<std::string, std::string>> config;
+  for (auto& [k, v] : given) {
+    const spml_config_key* key = find_config_key(p.config_keys, k);
+    if (!key)
+      throw PluginError(where + ": unknown key '" + k + "' for " + plugin + " (accepted: type, joints, " +
+                        config_key_list(p.config_keys) + ")");
+    if (std::string why = check_config_value(*key, v); !why.empty())
+      throw PluginError(where + ": " + plugin + ": key '" + k + "': " + why);
+    config.emplace_back(k, v);
+  }
+  for (const spml_config_key* key = p.config_keys; key && key->name; ++key) {
+    bool present = false;
+    for (auto& kv : given) present |= kv.first == key->name;
+    if (present) continue;
+    if (!key->default_value) throw PluginError(where + ": " + plugin + ": missing required key '" + key->name + "'");
+    config.emplace_back(key->name, key->default_value);
+  }
+  std::vector<const char*> keys, values;
+  for (auto& [k, v] : config) {
+    keys.push_back(k.c_str());
+    values.push_back(v.c_str());
+  }
+  char err[512] = {0};
+  void* state = p.create(m, joints.data(), static_cast<int32_t>(joints.size()), keys.data(), values.data(),
+                         static_cast<int32_t>(keys.size()), err, sizeof err);
+  if (!state) throw PluginError(where + ": " + plugin + ": " + (err[0] ? err : "create failed"));
+  return state;
+}
+
+}  // namespace
+
+PluginInstance::PluginInstance(const spml_force_plugin& plugin, const mjModel* m, const std::vector<int>& joints,
+                               const std::vector<std::pair<std::string, std::string>>& config, const std::string& where)
+    : plugin_(&plugin), state_(create_checked(plugin, m, joints, config, where)) {}
+
+PluginInstance::~PluginInstance() {
+  if (state_) plugin_->destroy(state_);
+}
+
+std::vector<std::string> PluginInstance::param_names() const {
+  std::vector<std::string> out;
+  for (int i = 0; i < nparam(); ++i) out.push_back(plugin_->param_name(state_, i));
+  return out;
+}
+
+Eigen::VectorXd PluginInstance::params() const {
+  Eigen::VectorXd theta(nparam());
+  plugin_->get_params(state_, theta.data());
+  return theta;
+}
+
+void PluginInstance::set_params(const Eigen::VectorXd& theta) {
+  if (theta.size() != nparam()) throw PluginError("set_params: expected " + std::to_string(nparam()) + " values");
+  plugin_->set_params(state_, theta.data());
+}
+
+std::string PluginInstance::config_text() const {
+  if (!plugin_->write_config) return "";
+  std::vector<char> buf(256);
+  int32_t n = plugin_->write_config(state_, buf.data(), buf.size());
+  if (n >= 0 && static_cast<size_t>(n) >= buf.size()) {
+    buf.resize(static_cast<size_t>(n) + 1);
+    n = plugin_->write_config(state_, buf.data(), buf.size());
+  }
+  return n < 0 ? "" : std::string(buf.data());
+}
+
 ForceEffects::ForceEffects(const mjModel* m, const std::string& source) : m_(m) {
   for (auto& decl : parse_plugin_declarations(m, source)) {
     const std::string where = source + ": " + decl.element;
     const spml_force_plugin& p = load_force_plugin(decl.type, where);
-    const std::string plugin = "plugin '" + decl.type + "'";
-    // Check every value against the plugin's key table, then fill in the defaults.
-    std::vector<std::pair<std::string, std::string>> config;
-    for (auto& [k, v] : decl.config) {
-      const spml_config_key* key = find_config_key(p.config_keys, k);
-      if (!key)
-        throw PluginError(where + ": unknown key '" + k + "' for " + plugin + " (accepted: type, joints, " +
-                          config_key_list(p.config_keys) + ")");
-      if (std::string why = check_config_value(*key, v); !why.empty())
-        throw PluginError(where + ": " + plugin + ": key '" + k + "': " + why);
-      config.emplace_back(k, v);
-    }
-    for (const spml_config_key* key = p.config_keys; key && key->name; ++key) {
-      bool given = false;
-      for (auto& kv : decl.config) given |= kv.first == key->name;
-      if (given) continue;
-      if (!key->default_value) throw PluginError(where + ": " + plugin + ": missing required key '" + key->name + "'");
-      config.emplace_back(key->name, key->default_value);
-    }
-    std::vector<const char*> keys, values;
-    for (auto& [k, v] : config) {
-      keys.push_back(k.c_str());
-      values.push_back(v.c_str());
-    }
     std::vector<int> joints;
     for (auto& j : decl.joints) joints.push_back(mj_name2id(m, mjOBJ_JOINT, j.c_str()));
-    char err[512] = {0};
-    void* state = p.create(m, joints.data(), static_cast<int32_t>(joints.size()), keys.data(), values.data(),
-                           static_cast<int32_t>(keys.size()), err, sizeof err);
-    if (!state) throw PluginError(where + ": " + plugin + ": " + (err[0] ? err : "create failed"));
+    void* state = create_checked(p, m, joints, decl.config, where);
     int np = p.nparam(state);
     instances_.push_back({std::move(decl), &p, state, nparam_, np});
     nparam_ += np;

@@ -17,6 +17,7 @@ void add_bench(CLI::App& app);
 void add_compare(CLI::App& app);
 void add_learners(CLI::App& app);
 void add_plugins(CLI::App& app);
+void add_diagnose(CLI::App& app);
 
 // Option values that CLI11 would convert too leniently ("-1" into 2^64-1) are taken as
 // text and parsed here, with messages naming the option.

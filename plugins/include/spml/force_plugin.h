@@ -1,4 +1,4 @@
-/* spml force-plugin ABI, version 2.
+/* spml force-plugin ABI, version 3.
  *
  * A force plugin adds a passive generalized force to a MuJoCo model: friction of some kind,
  * a ripple, an offset. MuJoCo 2.2.2 has no engine-plugin API, so this is spml's own, shaped
@@ -16,7 +16,8 @@
  *
  * Version history: 1 - spmlForcePlugin, one plugin per library (spml_force_plugin()),
  * NULL-terminated key names. 2 - this layout (snake_case, several plugins per library,
- * typed key table, size_t error buffers, shape parameters).
+ * typed key table, size_t error buffers, shape parameters). 3 - write_config, so a fitted
+ * instance can be written back into an MJCF declaration (spml diagnose's extended model).
  */
 #ifndef SPML_FORCE_PLUGIN_H
 #define SPML_FORCE_PLUGIN_H
@@ -29,7 +30,7 @@
 extern "C" {
 #endif
 
-#define SPML_FORCE_PLUGIN_ABI_VERSION 2
+#define SPML_FORCE_PLUGIN_ABI_VERSION 3
 
 /* Where a shape parameter's search range is measured (see spml_shape_param). */
 #define SPML_SHAPE_ABSOLUTE 0  /* lo..hi as given */
@@ -82,6 +83,12 @@ typedef struct spml_force_plugin {
 
   /* Optional (NULL if none): the shape parameters, {NULL}-terminated. */
   const spml_shape_param* shape_params;
+
+  /* Optional (NULL if it cannot): write into buf the configuration, as space-separated
+   * key=value words without type/joints, that recreates this instance with its current
+   * parameters (set_params included). Returns the length it needed (like snprintf); the
+   * host retries with a larger buffer when that is >= size. */
+  int32_t (*write_config)(const void* instance, char* buf, size_t size);
 } spml_force_plugin;
 
 #ifdef __cplusplus

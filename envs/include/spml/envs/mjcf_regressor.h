@@ -22,6 +22,9 @@ namespace spml {
 
 struct RegressorOptions {
   bool offsets = false;   // add a constant-torque column per joint
+  // Coulomb (frictionloss) columns only for joints whose MJCF gives a frictionloss: diagnose
+  // uses this so that dry friction the model leaves out is named as an effect, not a parameter.
+  bool coulomb_only_where_modelled = false;
 };
 
 class MjcfRegressor {
@@ -70,6 +73,7 @@ class MjcfRegressor {
   std::vector<std::string> joints_, names_;
   Eigen::VectorXd pi_;
   std::vector<int> tendons_, stiff_joints_;
+  std::vector<bool> coulomb_;   // per joint: has a Coulomb column
 };
 
 // Where the joints of an MJCF are in a split: X columns q:/qd:/qdd:<joint> for every joint,

@@ -45,6 +45,33 @@ const spml_force_plugin& load_force_plugin(const std::string& type, const std::s
 // Names of all plugins found.
 std::vector<std::string> available_force_plugins();
 
+// One instance of a plugin made outside a model's declarations (diagnose's candidates): the
+// configuration is checked against the plugin's key table and completed with its defaults
+// exactly as for a declaration; `where` prefixes messages. Throws PluginError.
+class PluginInstance {
+ public:
+  PluginInstance(const spml_force_plugin& plugin, const mjModel* m, const std::vector<int>& joints,
+                 const std::vector<std::pair<std::string, std::string>>& config, const std::string& where);
+  ~PluginInstance();
+  PluginInstance(PluginInstance&& o) noexcept : plugin_(o.plugin_), state_(o.state_) { o.state_ = nullptr; }
+  PluginInstance(const PluginInstance&) = delete;
+  PluginInstance& operator=(const PluginInstance&) = delete;
+  PluginInstance& operator=(PluginInstance&&) = delete;
+
+  const spml_force_plugin& plugin() const { return *plugin_; }
+  void* state() const { return state_; }
+  int nparam() const { return plugin_->nparam(state_); }
+  std::vector<std::string> param_names() const;
+  Eigen::VectorXd params() const;
+  void set_params(const Eigen::VectorXd& theta);
+  // The key=value words that recreate it (write_config); empty when the plugin cannot.
+  std::string config_text() const;
+
+ private:
+  const spml_force_plugin* plugin_;
+  void* state_;
+};
+
 // The plugin instances of one model. While attached, MuJoCo's passive-force callback adds
 // their forces for this model (and only this model) in every mj_step/mj_forward/mj_inverse.
 class ForceEffects {

@@ -1,0 +1,56 @@
+// spml diagnose: what an MJCF gets wrong on measured data, the cause, the extended model, the gain.
+#include <cstdlib>
+#include <filesystem>
+#include <iostream>
+
+#include "commands.h"
+#include "spml/diagnose.h"
+#include "spml/force_effects.h"
+#include "spml/plugin_loader.h"
+
+namespace spml::cli {
+
+void add_diagnose(CLI::App& app) {
+  auto* cmd = app.add_subcommand("diagnose", "Name what a model gets wrong on measured data, write the extended MJCF, measure the gain");
+  auto o = std::make_shared<DiagnoseOptions>();
+  auto out = std::make_shared<std::string>();
+  auto paths = std::make_shared<std::vector<std::string>>();
+  auto no_plots = std::make_shared<bool>(false);
+  cmd->add_option("--model,-m", o->model, "MJCF of the robot (hinge/slide joints)")->required();
+  cmd->add_option("--data,-d", o->data, "spml/1 dataset with q:/qd:/qdd:<joint> inputs and tau:<joint> targets")->required();
+  cmd->add_option("--fit-split", o->fit_split, "split the causes are fitted on")->capture_default_str();
+  cmd->add_option("--test-split", o->test_split,
+                  "split the gain is measured on (default: the first other split; with one split, its last --holdout rows)");
+  cmd->add_option("--holdout", o->holdout, "fraction held out (time-ordered) when the dataset has one split")
+      ->capture_default_str()->check(CLI::Range(0.05, 0.9));
+  cmd->add_option("--cross", o->cross, "another dataset (e.g. a validation record) scored before, after each cause and after all; repeatable");
+  cmd->add_option("--out,-o", *out, "output folder: report.json, report.md, extended.xml, series.csv, plots/")->required();
+  cmd->add_option("--plugin-path", *paths, "extra force-plugin library or folder: its plugins are candidates too (also $SPML_PLUGIN_PATH)");
+  cmd->add_option("--bic-threshold", o->bic_threshold, "evidence a cause needs on the fit split (Delta BIC)")
+      ->capture_default_str()->check(CLI::Range(0.0, 1e9));
+  cmd->add_option("--min-gain", o->min_gain, "relative drop of its joints' test residual sum of squares a cause needs")
+      ->capture_default_str()->check(CLI::Range(0.0, 1.0));
+  cmd->add_option("--max-causes", o->max_causes, "stop after this many causes")->capture_default_str()->check(CLI::Range(1, 1000));
+  cmd->add_option("--still-speed", o->still_speed, "a joint whose |qd| never exceeds this does not move")->capture_default_str()->check(CLI::Range(0.0, 1e9));
+  cmd->add_option("--rollout-seconds", o->rollout_seconds, "length of each rollout")->capture_default_str()->check(CLI::Range(1e-3, 10.0));
+  cmd->add_option("--rollouts", o->rollouts, "number of rollouts (0: none)")->capture_default_str()->check(CLI::Range(0, 10000));
+  cmd->add_flag("--no-plots", *no_plots, "do not draw plots/ (needs /usr/bin/python3 with matplotlib)");
+  cmd->callback([=] {
+    add_plugin_paths(*paths);
+    for (const auto& w : force_plugins().warnings()) std::cerr << "spml: warning: " << w << "\n";
+    const DiagnoseResult r = diagnose(*o, *out);
+    std::cout << r.summary;
+    const auto& t = r.report["timings_s"];
+    std::cout << "  time: search " << t["search"].get<double>() << " s, refits " << t["refits"].get<double>() << " s, rollouts "
+              << t["rollouts"].get<double>() << " s, load " << t["load"].get<double>() << " s, outputs " << t["outputs"].get<double>() << " s\n";
+    if (!*no_plots) {
+      const std::string script = (std::filesystem::path(spml_share_dir()) / "plots" / "diagnose_plots.py").string();
+      const std::string command = "/usr/bin/python3 '" + script + "' '" + *out + "'";
+      if (std::system(command.c_str()) != 0)
+        std::cerr << "spml: warning: plots not drawn (" << command << " failed; is python3-matplotlib installed?)\n";
+    }
+    std::cout << "  wrote " << *out << "/report.json, report.md, extended.xml, series.csv" << (*no_plots ? "" : ", plots/") << "\n";
+  });
+}
+
+}  // namespace spml::cli

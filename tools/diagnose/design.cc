@@ -1,0 +1,127 @@
+#include "design.h"
+
+#include <Eigen/Dense>
+#include <cmath>
+#include <limits>
+
+namespace spml::diagnose_detail {
+
+// A direction counts as new when at least this fraction of its (unit) norm lies outside the
+// span of the columns already there: well above rounding, well below any real effect.
+constexpr double kRankTolerance = 1e-6;
+
+Eigen::MatrixXd BlockColumns::dense() const {
+  Eigen::MatrixXd M = Eigen::MatrixXd::Zero(rows_per_output * outputs, cols);
+  for (size_t a = 0; a < active.size(); ++a) M.middleRows(active[a] * rows_per_output, rows_per_output) = parts[a];
+  return M;
+}
+
+Eigen::VectorXd BlockColumns::times(const Eigen::VectorXd& x) const {
+  Eigen::VectorXd out = Eigen::VectorXd::Zero(rows_per_output * outputs);
+  for (size_t a = 0; a < active.size(); ++a) out.segment(active[a] * rows_per_output, rows_per_output) = parts[a] * x;
+  return out;
+}
+
+BlockColumns BlockColumns::from_dense(const Eigen::MatrixXd& M, Eigen::Index rows_per_output, int outputs) {
+  BlockColumns b;
+  b.rows_per_output = rows_per_output;
+  b.outputs = outputs;
+  b.cols = static_cast<int>(M.cols());
+  for (int o = 0; o < outputs; ++o) {
+    auto part = M.middleRows(o * rows_per_output, rows_per_output);
+    if (part.cwiseAbs().maxCoeff() == 0) continue;
+    b.active.push_back(o);
+    b.parts.emplace_back(part);
+  }
+  return b;
+}
+
+Fit fit_blocks(const std::vector<const BlockColumns*>& blocks, const Eigen::VectorXd& y, bool want_q) {
+  Eigen::Index cols = 0;
+  for (auto* b : blocks) cols += b->cols;
+  Eigen::MatrixXd F(y.size(), cols);
+  Eigen::Index c = 0;
+  for (auto* b : blocks) {
+    F.middleCols(c, b->cols) = b->dense();
+    c += b->cols;
+  }
+  Fit fit;
+  fit.coef = Eigen::VectorXd::Zero(cols);
+  fit.stderr_ = Eigen::VectorXd::Constant(cols, std::numeric_limits<double>::infinity());
+  fit.determined.assign(static_cast<size_t>(cols), false);
+  if (cols == 0) {
+    fit.residual = y;
+    fit.rss = y.squaredNorm();
+    fit.Q = Eigen::MatrixXd(y.size(), 0);
+    return fit;
+  }
+  Eigen::VectorXd scale = F.colwise().norm().transpose();
+  for (Eigen::Index k = 0; k < cols; ++k) scale[k] = scale[k] > 0 ? scale[k] : 1.0;
+  F *= scale.cwiseInverse().asDiagonal();
+  Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(F);
+  // Rank from the pivots of the unit-norm columns (they fall monotonically).
+  const Eigen::MatrixXd& R = qr.matrixQR();
+  int rank = 0;
+  while (rank < std::min<Eigen::Index>(cols, F.rows()) && std::fabs(R(rank, rank)) > kRankTolerance) ++rank;
+  fit.rank = rank;
+  const auto& perm = qr.colsPermutation().indices();
+  Eigen::MatrixXd Qfull = qr.householderQ() * Eigen::MatrixXd::Identity(F.rows(), rank);
+  Eigen::VectorXd qty = Qfull.transpose() * y;
+  Eigen::MatrixXd R11 = R.topLeftCorner(rank, rank).triangularView<Eigen::Upper>();
+  Eigen::VectorXd z = R11.triangularView<Eigen::Upper>().solve(qty);
+  fit.residual = y - Qfull * qty;
+  fit.rss = fit.residual.squaredNorm();
+  const double dof = std::max<double>(1.0, static_cast<double>(y.size() - rank));
+  const double sigma2 = fit.rss / dof;
+  Eigen::MatrixXd Rinv = R11.triangularView<Eigen::Upper>().solve(Eigen::MatrixXd::Identity(rank, rank));
+  for (int i = 0; i < rank; ++i) {
+    const int k = perm[i];
+    fit.coef[k] = z[i] / scale[k];
+    fit.stderr_[k] = std::sqrt(sigma2 * Rinv.row(i).squaredNorm()) / scale[k];
+    fit.determined[static_cast<size_t>(k)] = true;
+  }
+  if (want_q) fit.Q = std::move(Qfull);
+  return fit;
+}
+
+Gain gain_of(const BlockColumns& C, const Eigen::MatrixXd& Q, const Eigen::VectorXd& r) {
+  const Eigen::Index N = C.rows_per_output;
+  // G = C^T C - (Q^T C)^T (Q^T C) and g = C^T r (r is orthogonal to Q), over the active rows only.
+  Eigen::MatrixXd QtC = Eigen::MatrixXd::Zero(Q.cols(), C.cols), CtC = Eigen::MatrixXd::Zero(C.cols, C.cols);
+  Eigen::VectorXd g = Eigen::VectorXd::Zero(C.cols);
+  for (size_t a = 0; a < C.active.size(); ++a) {
+    const auto rows = C.active[a] * N;
+    QtC.noalias() += Q.middleRows(rows, N).transpose() * C.parts[a];
+    CtC.noalias() += C.parts[a].transpose() * C.parts[a];
+    g.noalias() += C.parts[a].transpose() * r.segment(rows, N);
+  }
+  Eigen::VectorXd scale = CtC.diagonal().cwiseSqrt();
+  Gain out;
+  if (scale.size() == 0) return out;
+  for (Eigen::Index k = 0; k < scale.size(); ++k) scale[k] = scale[k] > 0 ? 1.0 / scale[k] : 0.0;
+  Eigen::MatrixXd G = scale.asDiagonal() * (CtC - QtC.transpose() * QtC) * scale.asDiagonal();
+  g = scale.asDiagonal() * g;
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(G);
+  for (Eigen::Index k = 0; k < G.rows(); ++k) {
+    const double lambda = eig.eigenvalues()[k];
+    if (lambda <= kRankTolerance * kRankTolerance) continue;
+    const double proj = eig.eigenvectors().col(k).dot(g);
+    out.rss_drop += proj * proj / lambda;
+    ++out.rank;
+  }
+  out.rss_drop = std::min(out.rss_drop, r.squaredNorm());
+  return out;
+}
+
+Eigen::VectorXd predict_blocks(const std::vector<const BlockColumns*>& blocks, const Eigen::VectorXd& coef,
+                               Eigen::Index rows) {
+  Eigen::VectorXd out = Eigen::VectorXd::Zero(rows);
+  Eigen::Index c = 0;
+  for (auto* b : blocks) {
+    out += b->times(coef.segment(c, b->cols));
+    c += b->cols;
+  }
+  return out;
+}
+
+}  // namespace spml::diagnose_detail

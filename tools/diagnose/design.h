@@ -1,0 +1,48 @@
+// The least-squares machinery of diagnose: a stacked design of column blocks (the base
+// parameters, and one block per cause) over the fit and test rows of a dataset.
+#pragma once
+
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+namespace spml::diagnose_detail {
+
+// Columns of one block on one split, stored per output (rows o*N .. o*N+N-1 of the stacked
+// design): outputs that are all zero are not stored, since most effects act on one joint.
+struct BlockColumns {
+  Eigen::Index rows_per_output = 0;
+  int outputs = 0, cols = 0;
+  std::vector<int> active;                 // outputs with a nonzero part
+  std::vector<Eigen::MatrixXd> parts;      // per active output: rows_per_output x cols
+  Eigen::MatrixXd dense() const;           // the full stacked block
+  Eigen::VectorXd times(const Eigen::VectorXd& x) const;   // block * x, stacked
+  static BlockColumns from_dense(const Eigen::MatrixXd& M, Eigen::Index rows_per_output, int outputs);
+};
+
+// A least-squares fit of target y on the concatenated blocks, with columns scaled to unit norm
+// and a rank-revealing QR; columns the data leave undetermined get 0 (for the base block:
+// the prior) and an infinite standard error.
+struct Fit {
+  Eigen::VectorXd coef, stderr_;
+  std::vector<bool> determined;
+  int rank = 0;
+  double rss = 0;
+  Eigen::VectorXd residual;   // y - F coef on the fit rows
+  Eigen::MatrixXd Q;          // orthonormal basis of the determined columns (fit rows)
+};
+Fit fit_blocks(const std::vector<const BlockColumns*>& blocks, const Eigen::VectorXd& y, bool want_q);
+
+// What adding block C to a fit with basis Q and residual r gains: the drop of the residual
+// sum of squares and the number of new independent directions (rank increase).
+struct Gain {
+  double rss_drop = 0;
+  int rank = 0;
+};
+Gain gain_of(const BlockColumns& C, const Eigen::MatrixXd& Q, const Eigen::VectorXd& r);
+
+// The prediction of blocks with coefficients coef (concatenated in block order).
+Eigen::VectorXd predict_blocks(const std::vector<const BlockColumns*>& blocks, const Eigen::VectorXd& coef,
+                               Eigen::Index rows);
+
+}  // namespace spml::diagnose_detail

@@ -1,0 +1,66 @@
+// spml diagnose: what an MJCF model gets wrong on measured data, which cause explains it, and
+// how much the extended model gains on data the fit never saw.
+//
+//  1. Baseline: the model as given (its linear plugins included) through inverse dynamics on
+//     the measured states; residual per joint on the fit and test splits.
+//  2. Candidates: every force plugin found (shipped and on the plugin path) on every joint
+//     that moves. Linear parameters enter as regressor columns; shape parameters (band edges,
+//     a gear ratio, a Stribeck velocity) are searched over the plugin's own description
+//     (spml_shape_param): a grid, then a bounded local refinement (NLopt), with the linear
+//     amplitudes solved by least squares at every shape (variable projection).
+//  3. Forward selection with the base parameters refitted jointly: at each step the passing
+//     candidate with the most evidence per added parameter (Delta BIC / added rank) joins,
+//     where passing = Delta BIC above a threshold on the fit split AND a relative drop of the
+//     test-split residual on its joints of at least min_gain. Then backward elimination drops
+//     causes that later ones made redundant (reported as superseded, not deleted).
+//  4. "parameters": the re-identified base parameters are a cause when the data contradict
+//     the MJCF's values given the effects found (Delta BIC and test gain as above).
+//  5. extended.xml, report.json, report.md, per-sample series for plots, rollouts.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "spml/dataset.h"
+
+namespace spml {
+
+struct DiagnoseOptions {
+  std::string model;        // MJCF file
+  std::string data;         // spml/1 dataset (q:/qd:/qdd:/tau:<joint> columns)
+  std::string fit_split = "train";
+  std::string test_split;   // "" = the first other split, or a time-ordered hold-out
+  double holdout = 0.3;     // fraction held out (the last rows) when the dataset has one split
+  double bic_threshold = 10;   // Delta BIC a cause needs on the fit split ("strong" evidence)
+  double min_gain = 0.02;      // relative drop of its joints' test residual sum of squares
+  int max_causes = 16;
+  double still_speed = 1e-3;   // a joint whose |qd| never exceeds this does not move
+  double rollout_seconds = 0.1;
+  int rollouts = 20;
+  // Other datasets (e.g. a validation record) whose every split is scored with the model as
+  // given, after each cause and with the final model; they play no part in the selection.
+  std::vector<std::string> cross;
+};
+
+// Where the time went (seconds).
+struct DiagnoseTimings {
+  double load = 0, baseline = 0, search = 0, refits = 0, rollouts = 0, outputs = 0;
+};
+
+struct DiagnoseResult {
+  nlohmann::json report;          // the report.json contract (README "Diagnose measured data")
+  std::string summary;            // the ranked summary printed by the command
+  std::string extended_mjcf;      // text of extended.xml
+  DiagnoseTimings timings;
+};
+
+// Runs the whole diagnosis and, when out_dir is not empty, writes report.json, report.md,
+// extended.xml, series.csv and plots/ there (each file atomically). Throws std::exception with
+// a message naming the file, split, column or plugin on bad input.
+DiagnoseResult diagnose(const DiagnoseOptions& options, const std::string& out_dir);
+
+}  // namespace spml

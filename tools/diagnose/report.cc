@@ -1,0 +1,118 @@
+#include "report.h"
+
+#include <cmath>
+#include <iomanip>
+#include <sstream>
+
+namespace spml::diagnose_detail {
+namespace {
+
+std::string num(double v, int precision = 4) {
+  std::ostringstream s;
+  s.precision(precision);
+  s << v;
+  return s.str();
+}
+std::string pct(double v) { return num(100 * v, 3) + " %"; }
+
+// "name value ± se (was prior)" lines of a cause's parameters.
+std::string params_text(const nlohmann::json& c, const std::string& sep) {
+  std::string out;
+  for (auto it = c["params"].begin(); it != c["params"].end(); ++it) {
+    out += (out.empty() ? "" : sep) + it.key() + " " + num(it.value().get<double>());
+    if (c["stderr"].contains(it.key()) && c["stderr"][it.key()].is_number()) out += " ± " + num(c["stderr"][it.key()].get<double>(), 2);
+    if (c.contains("prior") && c["prior"].contains(it.key())) out += " (MJCF: " + num(c["prior"][it.key()].get<double>()) + ")";
+  }
+  const nlohmann::json shape = c.value("shape", nlohmann::json::object());
+  for (auto it = shape.begin(); it != shape.end(); ++it)
+    out += (out.empty() ? "" : sep) + it.key() + " " + num(it.value().get<double>());
+  return out;
+}
+
+}  // namespace
+
+std::string report_summary(const nlohmann::json& r) {
+  std::ostringstream s;
+  s << "diagnose " << r["model"].get<std::string>() << " on " << r["data"].get<std::string>() << " (fit '"
+    << r["fit_split"].get<std::string>() << "', test '" << r["test_split"].get<std::string>() << "')\n";
+  s << "  model as given: relative error on test " << pct(r["baseline"]["rel_error_test_all"].get<double>()) << "\n";
+  int rank = 0;
+  for (const auto& c : r["causes"]) {
+    s << "  " << ++rank << ". " << c["effect"].get<std::string>();
+    if (c["effect"] != "parameters") s << " on " << c["joints"][0].get<std::string>();
+    s << "  (dBIC " << num(c["delta_bic"].get<double>(), 5) << ", test error after " << pct(c["rel_error_test_after_all"].get<double>()) << ")";
+    if (c.contains("superseded_by")) s << "  superseded by " << c["superseded_by"].get<std::string>();
+    s << "\n";
+  }
+  if (r["causes"].empty()) s << "  no cause found: nothing passes the evidence and held-out tests\n";
+  s << "  final: relative error on test " << pct(r["final"]["rel_error_test_all"].get<double>()) << "\n";
+  for (const auto& c : r.value("cross", nlohmann::json::array()))
+    s << "  cross " << c["data"].get<std::string>() << " '" << c["split"].get<std::string>() << "': " << pct(c["rel_error_given"].get<double>())
+      << " as given -> " << pct(c["rel_error_final"].get<double>()) << "\n";
+  for (const auto& n : r["not_identifiable"]) s << "  not identifiable: " << n["joint"].get<std::string>() << "\n";
+  return s.str();
+}
+
+std::string report_markdown(const nlohmann::json& r) {
+  std::ostringstream s;
+  s << "# spml diagnose\n\n";
+  s << "- model: `" << r["model"].get<std::string>() << "`\n- data: `" << r["data"].get<std::string>() << "` (fit split `"
+    << r["fit_split"].get<std::string>() << "`, " << r["rows"]["fit"] << " rows; test split `" << r["test_split"].get<std::string>()
+    << "`, " << r["rows"]["test"] << " rows)\n";
+  if (!r.value("extended_mjcf", "").empty()) s << "- extended model: `" << r["extended_mjcf"].get<std::string>() << "`\n";
+  s << "\n## Residual per joint (test split)\n\n| joint | RMSE as given | RMSE final | rel. error as given | rel. error final |\n|---|---|---|---|---|\n";
+  for (const auto& j : r["joints"]) {
+    const std::string n = j.get<std::string>();
+    s << "| " << n << " | " << num(r["baseline"]["rmse_test"][n].get<double>()) << " | " << num(r["final"]["rmse_test"][n].get<double>())
+      << " | " << pct(r["baseline"]["rel_error_test"][n].get<double>()) << " | " << pct(r["final"]["rel_error_test"][n].get<double>()) << " |\n";
+  }
+  s << "| all | | | " << pct(r["baseline"]["rel_error_test_all"].get<double>()) << " | " << pct(r["final"]["rel_error_test_all"].get<double>()) << " |\n";
+  if (r.contains("cross")) {
+    s << "\n## Other records (not used for the selection): relative error, all joints\n\n| data | split | as given | after each cause | final |\n|---|---|---|---|---|\n";
+    for (const auto& c : r["cross"]) {
+      std::string steps;
+      for (const auto& v : c["rel_error_after_each_cause"]) steps += (steps.empty() ? "" : " → ") + pct(v.get<double>());
+      s << "| `" << c["data"].get<std::string>() << "` | " << c["split"].get<std::string>() << " | " << pct(c["rel_error_given"].get<double>())
+        << " | " << steps << " | " << pct(c["rel_error_final"].get<double>()) << " |\n";
+    }
+  }
+  s << "\n## Causes, in the order chosen\n\n";
+  if (r["causes"].empty()) s << "None: no candidate passed both the evidence test on the fit split and the held-out test.\n";
+  int k = 0;
+  for (const auto& c : r["causes"]) {
+    s << ++k << ". **" << c["effect"].get<std::string>() << "**";
+    std::string joints;
+    for (const auto& j : c["joints"]) joints += (joints.empty() ? "" : ", ") + j.get<std::string>();
+    s << " on " << joints << " - ΔBIC " << num(c["delta_bic"].get<double>(), 5) << ", test error after "
+      << pct(c["rel_error_test_after_all"].get<double>());
+    if (c.contains("superseded_by")) s << " (superseded by " << c["superseded_by"].get<std::string>() << ")";
+    s << "\n   - " << params_text(c, "\n   - ") << "\n";
+    if (c.contains("not_identifiable") && !c["not_identifiable"].empty())
+      s << "   - not identifiable from this data: " << c["not_identifiable"].size() << " base parameter(s)\n";
+  }
+  if (r.contains("rollout") && r["rollout"].contains("position_error_before")) {
+    const auto& ro = r["rollout"];
+    s << "\n## Rollouts (" << ro["windows"] << " windows of " << num(ro["horizon_s"].get<double>()) << " s under the measured torques)\n\n"
+      << "| joint | position error as given | extended |\n|---|---|---|\n";
+    for (auto it = ro["position_error_before"].begin(); it != ro["position_error_before"].end(); ++it)
+      s << "| " << it.key() << " | " << num(it.value().get<double>()) << " | " << num(ro["position_error_after"][it.key()].get<double>()) << " |\n";
+  } else if (r.contains("rollout")) {
+    s << "\nRollouts skipped: " << r["rollout"].value("skipped", "") << "\n";
+  }
+  if (!r["not_identifiable"].empty()) {
+    s << "\n## Not identifiable\n\n";
+    for (const auto& n : r["not_identifiable"]) s << "- " << n["joint"].get<std::string>() << ": " << n["reason"].get<std::string>() << "\n";
+  }
+  if (!r["not_tried"].empty()) {
+    s << "\n## Not tried\n\n";
+    for (const auto& n : r["not_tried"]) s << "- " << n["effect"].get<std::string>() << ": " << n["reason"].get<std::string>() << "\n";
+  }
+  if (!r["notes"].empty()) {
+    s << "\n## Notes\n\n";
+    for (const auto& n : r["notes"]) s << "- " << n.get<std::string>() << "\n";
+  }
+  s << "\n## Plots\n\n![residuals](plots/residuals.png)\n\n![states](plots/states.png)\n";
+  return s.str();
+}
+
+}  // namespace spml::diagnose_detail
