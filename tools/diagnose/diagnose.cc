@@ -542,8 +542,9 @@ void Diagnosis::select() {
       if (!causes_[i].superseded_by.empty() || needed(i, live(causes_.size()))) continue;
       // Superseded by the first later cause with which it is no longer needed.
       std::string by = "redundant";
+      const int joint = cands_[static_cast<size_t>(causes_[i].candidate)].joint;
       for (size_t k = i + 1; k < causes_.size(); ++k)
-        if (causes_[k].superseded_by.empty() && !needed(i, live(k))) {
+        if (causes_[k].superseded_by.empty() && cands_[static_cast<size_t>(causes_[k].candidate)].joint == joint && !needed(i, live(k))) {
           by = cands_[static_cast<size_t>(causes_[k].candidate)].plugin->name;
           break;
         }
@@ -658,9 +659,16 @@ void Diagnosis::build_report(const std::string& out_dir) {
       const auto colon = nm.find(':');
       const std::string kind = nm.substr(0, colon), what = nm.substr(colon + 1);
       if (kind == "armature" || kind == "damping" || kind == "stiffness" || kind == "coulomb") {
-        if (reg_->model()->njnt > 0 && mj_name2id(reg_->model(), mjOBJ_JOINT, what.c_str()) >= 0)
-          edits.joint_attributes[what][kind == "coulomb" ? "frictionloss" : kind] = pi[static_cast<Eigen::Index>(k)];
-        else
+        if (mj_name2id(reg_->model(), mjOBJ_JOINT, what.c_str()) >= 0) {
+          // MuJoCo needs these >= 0 (a negative armature makes the mass matrix singular, a
+          // negative damping feeds energy in): an estimate below 0 is written as 0, and said.
+          double v = pi[static_cast<Eigen::Index>(k)];
+          if (v < 0 && kind != "stiffness") {
+            notes.push_back(nm + " is estimated at " + fmt(v) + " (< 0, not physical): written as 0");
+            v = 0;
+          }
+          edits.joint_attributes[what][kind == "coulomb" ? "frictionloss" : kind] = v;
+        } else
           notes.push_back(nm + " changed but is a tendon quantity: not written");
       } else if (kind == "plugin") {
         notes.push_back(nm + " (a force plugin of the model) changed: not written, edit its declaration by hand");
