@@ -371,17 +371,51 @@ double Diagnosis::search_shape(Candidate& c, const Fit& current) {
     c.gain = Gain{};
     return 0;
   }
-  // Local refinement of the continuous shape parameters within one grid cell (subplex).
+  // Local refinement of the continuous shape parameters. First zoomed scans per parameter
+  // around the best grid point: the objective is piecewise constant in parameters that
+  // select samples (band edges), which derivative-free simplex methods stall on. Then a
+  // subplex polish (NLopt) for the smooth ones (a Stribeck velocity).
   std::vector<size_t> cont;
   for (size_t k = 0; k < ns; ++k)
     if (!c.shape[k]->integer && axes[k].size() > 1) cont.push_back(k);
+  for (int round = 0; round < 3 && !cont.empty(); ++round)
+    for (size_t k : cont) {
+      const double cell = (c.shape_range[k].second - c.shape_range[k].first) / (per_axis - 1) / std::pow(4.0, round);
+      for (int i = -8; i <= 8; ++i) {
+        std::vector<double> p = best;
+        p[k] = std::clamp(best[k] + cell * i / 8.0, c.shape_range[k].first, c.shape_range[k].second);
+        if (p[k] == best[k]) continue;
+        const Gain g = evaluate(p, nullptr);
+        if (g.rank > 0 && g.rss_drop > best_drop) best_drop = g.rss_drop, best = p;
+      }
+    }
+  // Parameters that select samples leave a plateau of equally good values between two
+  // samples; take its middle, the value least likely to misplace unseen samples.
+  for (size_t k : cont) {
+    const double fine = (c.shape_range[k].second - c.shape_range[k].first) / (per_axis - 1) / 256;
+    double ends[2] = {best[k], best[k]};
+    for (int side = 0; side < 2; ++side)
+      for (int i = 1; i <= 24; ++i) {
+        std::vector<double> p = best;
+        p[k] = best[k] + (side ? fine : -fine) * i;
+        if (p[k] < c.shape_range[k].first || p[k] > c.shape_range[k].second) break;
+        const Gain g = evaluate(p, nullptr);
+        if (!(g.rank > 0 && g.rss_drop >= best_drop * (1 - 1e-12))) break;
+        ends[side] = p[k];
+      }
+    if (ends[0] != ends[1]) {
+      std::vector<double> p = best;
+      p[k] = 0.5 * (ends[0] + ends[1]);
+      const Gain g = evaluate(p, nullptr);
+      if (g.rank > 0 && g.rss_drop >= best_drop * (1 - 1e-12)) best = p, best_drop = std::max(best_drop, g.rss_drop);
+    }
+  }
   if (!cont.empty()) {
     std::vector<double> lb, ub, x;
     for (size_t k : cont) {
-      const auto& ax = axes[k];
-      const size_t i = static_cast<size_t>(std::find(ax.begin(), ax.end(), best[k]) - ax.begin());
-      lb.push_back(ax[i > 0 ? i - 1 : 0]);
-      ub.push_back(ax[std::min(i + 1, ax.size() - 1)]);
+      const double cell = (c.shape_range[k].second - c.shape_range[k].first) / (per_axis - 1) / 16;
+      lb.push_back(std::max(c.shape_range[k].first, best[k] - cell));
+      ub.push_back(std::min(c.shape_range[k].second, best[k] + cell));
       x.push_back(best[k]);
     }
     struct Ctx {

@@ -1,0 +1,312 @@
+// spml diagnose must find what a generator hid in the data. Each draw (from a seed the code
+// under test never sees) picks a model - the project's planar arm, the VIA joint, or a random
+// 2-4 joint chain with random masses, axes and gravity direction - hides an effect from the
+// plugin vocabulary on a random joint (or two effects, or a payload, or nothing), and measures
+// a random multi-sine trajectory with torque noise. Diagnose must name exactly what was hidden,
+// and its held-out error must be within 10 % of the true model's (which is the noise).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+#include <iomanip>
+#include <map>
+#include <random>
+#include <regex>
+#include <set>
+#include <sstream>
+
+#include "spml/dataset.h"
+#include "spml/diagnose.h"
+#include "spml/envs/mjcf_regressor.h"
+#include "spml/envs/mujoco_model.h"
+#include "test_util.h"
+
+namespace spml {
+namespace {
+
+std::string num(double v) {
+  std::ostringstream s;
+  s.precision(12);
+  s << v;
+  return s.str();
+}
+
+struct Draw {
+  std::string label;          // model name
+  std::string user_xml;       // what the user has
+  std::string true_xml;       // what made the data
+  std::vector<std::string> joints;
+  std::set<std::string> expected;   // "effect@joint" or "parameters"
+  std::string hidden;               // for the confusion table
+  std::map<std::string, double> truth;   // linear parameters to check: "effect@joint.param"
+};
+
+// A chain of n hinge bodies with random geometry, masses, axes and gravity direction.
+std::string random_chain(std::mt19937_64& rng, int n, double payload) {
+  std::uniform_real_distribution<double> u(-1, 1), pos(0.2, 0.5), mass(0.5, 3.0), inertia(0.005, 0.05);
+  Eigen::Vector3d g(u(rng), u(rng), u(rng));
+  g = 9.81 * g.normalized();
+  std::ostringstream x;
+  x << "<mujoco model=\"chain\">\n  <option gravity=\"" << g.x() << " " << g.y() << " " << g.z() << "\"/>\n  <worldbody>\n";
+  for (int j = 0; j < n; ++j) {
+    Eigen::Vector3d axis(u(rng), u(rng), u(rng));
+    axis.normalize();
+    double m = mass(rng);
+    if (j == n - 1) m += payload;
+    x << std::string(4 + 2 * j, ' ') << "<body name=\"b" << j << "\" pos=\"" << (j ? pos(rng) : 0.0) << " 0 0\">\n"
+      << std::string(6 + 2 * j, ' ') << "<joint name=\"j" << j << "\" type=\"hinge\" axis=\"" << axis.x() << " " << axis.y() << " "
+      << axis.z() << "\" armature=\"" << 0.05 << "\" damping=\"" << 0.5 << "\"/>\n"
+      << std::string(6 + 2 * j, ' ') << "<inertial pos=\"" << 0.5 * pos(rng) << " " << 0.05 * u(rng) << " 0\" mass=\"" << m
+      << "\" diaginertia=\"" << [&] {
+           // Three moments within 30 % of each other always satisfy the triangle inequality.
+           const double i0 = inertia(rng);
+           std::uniform_real_distribution<double> f(0.7, 1.0);
+           return num(i0 * f(rng)) + " " + num(i0 * f(rng)) + " " + num(i0 * f(rng));
+         }() << "\"/>\n";
+  }
+  for (int j = n - 1; j >= 0; --j) x << std::string(4 + 2 * j, ' ') << "</body>\n";
+  x << "  </worldbody>\n</mujoco>\n";
+  return x.str();
+}
+
+std::string read_file(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+std::string with_declarations(std::string xml, const std::vector<std::string>& texts) {
+  if (texts.empty()) return xml;
+  std::string custom = "  <custom>\n";
+  for (size_t i = 0; i < texts.size(); ++i) custom += "    <text name=\"spml.plugin.hidden" + std::to_string(i) + "\" data=\"" + texts[i] + "\"/>\n";
+  custom += "  </custom>\n";
+  const auto end = xml.rfind("</mujoco>");
+  return xml.insert(end, custom);
+}
+
+// Writes a dataset measured from the true model: a multi-sine per joint, torques with noise.
+struct Measured {
+  double true_rel_error_test = 0;
+};
+Measured measure(const Draw& d, std::mt19937_64& rng, const std::string& true_path, const std::string& data_path,
+                 const std::vector<double>& sigma) {
+  MjcfRegressor reg(true_path);
+  const int J = static_cast<int>(d.joints.size()), N = 4000;
+  const double dt = 0.005;
+  std::uniform_real_distribution<double> amp(0.2, 0.6), freq(0.1, 0.5), phase(0, 2 * M_PI);
+  std::vector<std::array<double, 9>> waves(static_cast<size_t>(J));
+  for (auto& w : waves)
+    for (int k = 0; k < 3; ++k) w[static_cast<size_t>(3 * k)] = amp(rng), w[static_cast<size_t>(3 * k + 1)] = 2 * M_PI * freq(rng), w[static_cast<size_t>(3 * k + 2)] = phase(rng);
+  std::normal_distribution<double> noise(0, 1);
+  RowMatrix X(N, 3 * J), Y(N, J);
+  Eigen::VectorXd t(N);
+  auto ws = reg.workspace();
+  Eigen::VectorXd q(J), qd(J), qdd(J);
+  double noise_test = 0, tau_test = 0;
+  for (int i = 0; i < N; ++i) {
+    t[i] = i * dt;
+    for (int j = 0; j < J; ++j) {
+      q[j] = qd[j] = qdd[j] = 0;
+      for (int k = 0; k < 3; ++k) {
+        const double a = waves[static_cast<size_t>(j)][static_cast<size_t>(3 * k)], w = waves[static_cast<size_t>(j)][static_cast<size_t>(3 * k + 1)],
+                     p = waves[static_cast<size_t>(j)][static_cast<size_t>(3 * k + 2)];
+        q[j] += a * std::sin(w * t[i] + p);
+        qd[j] += a * w * std::cos(w * t[i] + p);
+        qdd[j] -= a * w * w * std::sin(w * t[i] + p);
+      }
+      X(i, j) = q[j];
+      X(i, J + j) = qd[j];
+      X(i, 2 * J + j) = qdd[j];
+    }
+    const Eigen::VectorXd tau = reg.evaluate(ws, q, qd, qdd) * reg.model_params();
+    for (int j = 0; j < J; ++j) {
+      const double e = sigma[static_cast<size_t>(j)] * noise(rng);
+      Y(i, j) = tau[reg.model()->jnt_dofadr[j]] + e;
+      if (i >= 2800) noise_test += e * e, tau_test += Y(i, j) * Y(i, j);
+    }
+  }
+  std::vector<std::string> xc, yc;
+  for (const char* p : {"q:", "qd:", "qdd:"})
+    for (const auto& j : d.joints) xc.push_back(p + j);
+  for (const auto& j : d.joints) yc.push_back("tau:" + j);
+  Dataset ds;
+  for (auto [name, b, e] : {std::tuple<const char*, int, int>{"train", 0, 2800}, {"test", 2800, N}}) {
+    Split s;
+    s.name = name;
+    s.x_columns = xc;
+    s.y_columns = yc;
+    s.X = X.middleRows(b, e - b);
+    s.Y = Y.middleRows(b, e - b);
+    s.t = t.segment(b, e - b);
+    ds.splits.push_back(s);
+  }
+  write_dataset(data_path, ds);
+  return {std::sqrt(noise_test / tau_test)};
+}
+
+// RMS per joint of the user's model's torques along a typical trajectory: the noise scale.
+std::vector<double> torque_scale(const std::string& path, int J) {
+  MjcfRegressor reg(path);
+  auto ws = reg.workspace();
+  std::vector<double> s(static_cast<size_t>(J), 0.0);
+  for (int i = 0; i < 200; ++i) {
+    Eigen::VectorXd q(J), qd(J), qdd(J);
+    for (int j = 0; j < J; ++j) q[j] = std::sin(0.1 * i + j), qd[j] = std::cos(0.13 * i + j), qdd[j] = 2 * std::sin(0.17 * i);
+    const Eigen::VectorXd tau = reg.evaluate(ws, q, qd, qdd) * reg.model_params();
+    for (int j = 0; j < J; ++j) s[static_cast<size_t>(j)] += tau[reg.model()->jnt_dofadr[j]] * tau[reg.model()->jnt_dofadr[j]] / 200;
+  }
+  for (auto& v : s) v = 0.01 * std::sqrt(v) + 0.002;
+  return s;
+}
+
+// One hidden effect on joint j (index into d.joints), its size a multiple k of the noise.
+std::string effect_text(const std::string& effect, const std::string& joint, double sigma, std::mt19937_64& rng, Draw& d) {
+  std::uniform_real_distribution<double> k(8, 14), u(0, 1);
+  const double a = k(rng) * sigma;
+  const std::string key = effect + "@" + joint;
+  if (effect == "coulomb") {
+    d.truth[key + ".fc"] = a;
+    return "type=coulomb joints=" + joint + " fc=" + num(a);
+  }
+  if (effect == "offset") {
+    const double c = u(rng) < 0.5 ? -a : a;
+    d.truth[key + ".c"] = c;
+    return "type=offset joints=" + joint + " c=" + num(c);
+  }
+  if (effect == "stribeck") return "type=stribeck joints=" + joint + " fc=" + num(0.5 * a) + " fs=" + num(1.5 * a) + " vs=" + num(0.1 + 0.2 * u(rng));
+  if (effect == "friction_band") {
+    // The trajectory spans about +-1 rad; a band of width 0.5-0.8 rad inside it.
+    const double lo = -0.6 + 0.5 * u(rng), w = 0.5 + 0.3 * u(rng);
+    return "type=friction_band joints=" + joint + " lower=" + num(lo) + " upper=" + num(lo + w) + " level=" + num(a);
+  }
+  if (effect == "ripple") {
+    const int gear = 3 + static_cast<int>(u(rng) * 30);
+    return "type=ripple joints=" + joint + " gear=" + std::to_string(gear) + " harmonics=1 amplitudes=" + num(a) + " phases=" + num(6 * u(rng));
+  }
+  if (effect == "asymmetric_friction") {
+    // Direction-dependent viscous friction on top of Coulomb (asymmetric Coulomb alone is
+    // Coulomb plus an offset: the data cannot tell them apart).
+    const double fv = a / 0.8;
+    return "type=asymmetric_friction joints=" + joint + " fc_pos=" + num(a) + " fc_neg=" + num(a) + " fv_pos=" + num(fv) + " fv_neg=" + num(0.2 * fv);
+  }
+  throw std::logic_error("unknown effect " + effect);
+}
+
+Draw make_draw(int index, std::mt19937_64& rng, const std::filesystem::path& dir, std::vector<double>& sigma) {
+  static const std::vector<std::string> vocabulary = {"coulomb", "offset", "stribeck", "friction_band", "ripple", "asymmetric_friction"};
+  Draw d;
+  std::uniform_int_distribution<int> pick_model(0, 3), pick_n(2, 4);
+  int model = pick_model(rng);   // 0 arm, 1 VIA, 2-3 random chain
+  const std::string scenario = index < 12 ? vocabulary[static_cast<size_t>(index) % vocabulary.size()]
+                                          : std::vector<std::string>{"nothing", "payload", "two", "nothing"}[static_cast<size_t>(index - 12)];
+  if (scenario == "payload") model = 2;
+  double payload = 0;
+  if (model == 0) {
+    d.label = "planar_arm3";
+    d.user_xml = read_file(std::string(SPML_SOURCE_DIR) + "/mjcf/planar_arm3.xml");
+    d.joints = {"joint0", "joint1", "joint2"};
+  } else if (model == 1) {
+    d.label = "via";
+    d.user_xml = std::regex_replace(read_file(std::string(SPML_SOURCE_DIR) + "/mjcf/via_joint.xml"), std::regex("<custom>[^]*</custom>"), "");
+    d.joints = {"motor", "link"};
+  } else {
+    const int n = pick_n(rng);
+    const auto seed = rng();
+    std::mt19937_64 chain_rng(seed);
+    d.label = "chain" + std::to_string(n);
+    d.user_xml = random_chain(chain_rng, n, 0);
+    if (scenario == "payload") {
+      payload = 2.0;
+      std::mt19937_64 again(seed);
+      d.true_xml = random_chain(again, n, payload);
+    }
+    for (int j = 0; j < n; ++j) d.joints.push_back("j" + std::to_string(j));
+  }
+  const std::string user_path = (dir / "user.xml").string();
+  std::ofstream(user_path) << d.user_xml;
+  sigma = torque_scale(user_path, static_cast<int>(d.joints.size()));
+  std::uniform_int_distribution<size_t> pick_joint(0, d.joints.size() - 1);
+  std::vector<std::string> texts;
+  d.hidden = scenario;
+  if (scenario == "payload") {
+    d.expected = {"parameters"};
+  } else if (scenario == "two") {
+    const size_t a = pick_joint(rng), b = (a + 1) % d.joints.size();
+    std::uniform_int_distribution<size_t> pick_effect(0, 1);
+    const std::string e1 = pick_effect(rng) ? "coulomb" : "offset", e2 = pick_effect(rng) ? "ripple" : "friction_band";
+    texts.push_back(effect_text(e1, d.joints[a], sigma[a], rng, d));
+    texts.push_back(effect_text(e2, d.joints[b], sigma[b], rng, d));
+    d.expected = {e1 + "@" + d.joints[a], e2 + "@" + d.joints[b]};
+    d.hidden = e1 + "+" + e2;
+  } else if (scenario != "nothing") {
+    const size_t j = pick_joint(rng);
+    texts.push_back(effect_text(scenario, d.joints[j], sigma[j], rng, d));
+    d.expected = {scenario + "@" + d.joints[j]};
+  }
+  if (d.true_xml.empty()) d.true_xml = with_declarations(d.user_xml, texts);
+  return d;
+}
+
+TEST(Diagnose, NamesExactlyWhatWasHidden) {
+  const auto dir = test::temp_dir("diagnose-hidden");
+  std::map<std::string, std::map<std::string, int>> confusion;
+  int failures = 0;
+  const int draws = 16;
+  for (int i = 0; i < draws; ++i) {
+    std::mt19937_64 rng(0x5eed0000u + static_cast<unsigned>(i));
+    std::vector<double> sigma;
+    Draw d = make_draw(i, rng, dir, sigma);
+    const std::string true_path = (dir / "true.xml").string(), data_path = (dir / ("d" + std::to_string(i) + ".h5")).string();
+    std::ofstream(true_path) << d.true_xml;
+    const Measured m = measure(d, rng, true_path, data_path, sigma);
+    DiagnoseOptions o;
+    o.model = (dir / "user.xml").string();
+    o.data = data_path;
+    o.rollouts = 0;
+    const auto r = diagnose(o, "").report;
+    std::set<std::string> named;
+    std::string named_text;
+    for (const auto& c : r["causes"]) {
+      if (c.contains("superseded_by")) continue;
+      const std::string e = c["effect"];
+      const std::string label = e == "parameters" ? e : e + "@" + c["joints"][0].get<std::string>();
+      named.insert(label);
+      named_text += (named_text.empty() ? "" : "+") + e;
+      // Linear parameters within four standard errors of the hidden values.
+      for (auto it = c["params"].begin(); it != c["params"].end() && e != "parameters"; ++it) {
+        const std::string key = e + "@" + c["joints"][0].get<std::string>() + "." + it.key().substr(it.key().find('.') + 1);
+        if (!d.truth.count(key)) continue;
+        const double se = c["stderr"][it.key()].get<double>();
+        EXPECT_NEAR(it.value().get<double>(), d.truth[key], 4 * se + 1e-9) << "draw " << i << " " << key;
+      }
+    }
+    confusion[d.hidden][named_text.empty() ? "nothing" : named_text]++;
+    const double final_err = r["final"]["rel_error_test_all"].get<double>();
+    const bool ok = named == d.expected && final_err <= 1.1 * m.true_rel_error_test;
+    if (!ok) ++failures;
+    std::string expected_text;
+    for (const auto& e : d.expected) expected_text += e + " ";
+    std::cout << "draw " << std::setw(2) << i << " " << std::setw(11) << d.label << "  hidden " << std::setw(28) << (expected_text.empty() ? "nothing" : expected_text)
+              << " named " << std::setw(28) << (named_text.empty() ? "nothing" : named_text) << " test error " << final_err << " (true model "
+              << m.true_rel_error_test << ")" << (ok ? "" : "  <-- FAIL") << "\n";
+    EXPECT_EQ(named, d.expected) << "draw " << i << " (" << d.label << ")\n" << r["causes"].dump(1);
+    EXPECT_LE(final_err, 1.1 * m.true_rel_error_test) << "draw " << i << ": hidden in\n" << d.true_xml << "\nfound\n" << r["causes"].dump(1);
+  }
+  std::cout << "\nconfusion table (rows: hidden, columns: named)\n";
+  std::set<std::string> cols;
+  for (auto& [h, row] : confusion)
+    for (auto& [n, c] : row) cols.insert(n);
+  std::cout << std::setw(24) << "";
+  for (auto& c : cols) std::cout << std::setw(24) << c;
+  std::cout << "\n";
+  for (auto& [h, row] : confusion) {
+    std::cout << std::setw(24) << h;
+    for (auto& c : cols) std::cout << std::setw(24) << (row.count(c) ? std::to_string(row[c]) : ".");
+    std::cout << "\n";
+  }
+  EXPECT_EQ(failures, 0);
+}
+
+}  // namespace
+}  // namespace spml
