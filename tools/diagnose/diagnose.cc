@@ -87,6 +87,9 @@ class Diagnosis {
   Eigen::VectorXd residual_on(const SplitData& s, const std::vector<int>& causes, bool base_free, const Fit& f) const;
   double rss_on(const Eigen::VectorXd& r, const std::vector<int>& outputs, Eigen::Index N) const;
   std::vector<int> outputs_of(int candidate) const;
+  // "" when the plugin accepts its fitted parameters (written back through write_config and
+  // created again), else its reason: a negative band level is not a friction band.
+  std::string refused(int candidate, const Eigen::VectorXd& theta) const;
   void select();
   nlohmann::json metrics(const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test) const;
   nlohmann::json per_joint(const Eigen::VectorXd& r, Eigen::Index N) const;
@@ -488,6 +491,26 @@ double Diagnosis::rss_on(const Eigen::VectorXd& r, const std::vector<int>& outpu
 
 std::vector<int> Diagnosis::outputs_of(int candidate) const { return cands_[static_cast<size_t>(candidate)].fit_cols.active; }
 
+std::string Diagnosis::refused(int candidate, const Eigen::VectorXd& theta) const {
+  const Candidate& c = cands_[static_cast<size_t>(candidate)];
+  try {
+    PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
+    inst.set_params(theta);
+    const std::string text = inst.config_text();
+    if (text.empty()) return "";   // cannot check; the extended model will say it is not written
+    std::vector<std::pair<std::string, std::string>> config;
+    std::istringstream words(text);
+    for (std::string w; words >> w;) {
+      const auto eq = w.find('=');
+      config.emplace_back(w.substr(0, eq), eq == std::string::npos ? "" : w.substr(eq + 1));
+    }
+    PluginInstance again(*c.plugin, reg_->model(), {c.joint}, config, "fitted");
+    return "";
+  } catch (const std::exception& e) {
+    return e.what();
+  }
+}
+
 void Diagnosis::select() {
   const double n = static_cast<double>(fit_.y0.size()), log_n = std::log(n);
   std::vector<int> chosen;
@@ -529,6 +552,8 @@ void Diagnosis::select() {
       std::vector<int> trial = chosen;
       trial.push_back(order[i]);
       Fit f = refit(trial, true);
+      Eigen::Index off = f.coef.size() - cands_[static_cast<size_t>(order[i])].fit_cols.cols;
+      if (!refused(order[i], f.coef.tail(f.coef.size() - off)).empty()) continue;
       Eigen::VectorXd rt = residual_on(test_, trial, true, f);
       const auto outs = outputs_of(order[i]);
       const double before = rss_on(r_test, outs, test_.N), after = rss_on(rt, outs, test_.N);
