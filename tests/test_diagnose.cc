@@ -423,7 +423,9 @@ TEST(Diagnose, StillJointIsNotIdentifiableAndGetsNoCause) {
   ASSERT_EQ(r["not_identifiable"].size(), 1u) << r.dump(1);
   EXPECT_EQ(r["not_identifiable"][0]["joint"], "j1");
   for (const auto& c : r["causes"])
-    if (c["effect"] != "parameters") EXPECT_NE(c["joints"][0], "j1") << c.dump(1);
+    if (c["effect"] != "parameters") {
+      EXPECT_NE(c["joints"][0], "j1") << c.dump(1);
+    }
 }
 
 }  // namespace

@@ -126,7 +126,9 @@ TEST(ForcePlugins, RippleSpectrumPeaksAtItsHarmonics) {
   EXPECT_NEAR(power[60], 6.0, 1e-9);
   EXPECT_NEAR(power[240], 2.0, 1e-9);
   for (int w = 1; w < 400; ++w)
-    if (w != 60 && w != 240) EXPECT_LT(power[w], 1e-9) << w;
+    if (w != 60 && w != 240) {
+      EXPECT_LT(power[w], 1e-9) << w;
+    }
 }
 
 // LuGre: a constant torque below the break-away force fs leaves the joint stuck (only the
