@@ -101,16 +101,7 @@ Dataset generate_via(bool autoregressive, const GenerateOptions& options) {
   }
   const Eigen::Index cut = static_cast<Eigen::Index>(std::lround(kTrainFraction * n));
   Dataset ds;
-  for (auto [name, b, e] : {std::tuple<const char*, Eigen::Index, Eigen::Index>{"train", 0, cut}, {"test", cut, n}}) {
-    Split s;
-    s.name = name;
-    s.x_columns = all.x_columns;
-    s.y_columns = all.y_columns;
-    s.X = all.X.middleRows(b, e - b);
-    s.Y = all.Y.middleRows(b, e - b);
-    s.t = all.t.segment(b, e - b);
-    ds.splits.push_back(std::move(s));
-  }
+  ds.splits = {all.slice(0, cut, "train"), all.slice(cut, n, "test")};
   ds.model.name = "via";
   ds.model.param_names = {"K", "D"};
   ds.model.prior = Eigen::Vector2d(300.0, 20.0);   // the paper's starting guess

@@ -131,17 +131,14 @@ Measured measure(const Draw& d, std::mt19937_64& rng, const std::string& true_pa
   for (const char* p : {"q:", "qd:", "qdd:"})
     for (const auto& j : d.joints) xc.push_back(p + j);
   for (const auto& j : d.joints) yc.push_back("tau:" + j);
+  Split all;
+  all.x_columns = xc;
+  all.y_columns = yc;
+  all.X = X;
+  all.Y = Y;
+  all.t = t;
   Dataset ds;
-  for (auto [name, b, e] : {std::tuple<const char*, int, int>{"train", 0, 2800}, {"test", 2800, N}}) {
-    Split s;
-    s.name = name;
-    s.x_columns = xc;
-    s.y_columns = yc;
-    s.X = X.middleRows(b, e - b);
-    s.Y = Y.middleRows(b, e - b);
-    s.t = t.segment(b, e - b);
-    ds.splits.push_back(s);
-  }
+  ds.splits = {all.slice(0, 2800, "train"), all.slice(2800, N, "test")};
   write_dataset(data_path, ds);
   return {std::sqrt(noise_test / tau_test)};
 }

@@ -22,7 +22,7 @@ struct Coulomb {
     for (int i = 0; i < np; ++i) R[joints[i].dof * np + i] = -smooth_sign(qvel[joints[i].dof], smooth);
     (void)m;
   }
-  std::string config() const { return "fc=" + exact_list(theta) + " smooth=" + exact(smooth); }
+  std::string config() const { return "fc=" + exact_list(theta) + " smooth=" + exact_text(smooth); }
   void compute(const mjModel* m, const mjData* d, mjtNum* qfrc) const { compute_linear(*this, m, d, qfrc); }
 
   std::vector<Joint> joints;

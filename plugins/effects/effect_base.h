@@ -19,7 +19,6 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
-#include <charconv>
 #include <cstdlib>
 #include <stdexcept>
 #include <string>
@@ -81,15 +80,10 @@ class EffectConfig {
   std::vector<std::pair<std::string, std::string>> kv_;
 };
 
-// Shortest text that reads back to the same double, and comma-joined lists of such.
-inline std::string exact(double v) {
-  char buf[32];
-  auto r = std::to_chars(buf, buf + sizeof buf, v);
-  return std::string(buf, r.ptr);
-}
+// Comma-joined exact_text of a list (a written configuration reads back to the same values).
 inline std::string exact_list(const std::vector<double>& v) {
   std::string out;
-  for (size_t i = 0; i < v.size(); ++i) out += (i ? "," : "") + exact(v[i]);
+  for (size_t i = 0; i < v.size(); ++i) out += (i ? "," : "") + exact_text(v[i]);
   return out;
 }
 // Every stride-th entry of theta starting at first: one parameter across joints.

@@ -36,7 +36,7 @@ struct FrictionBand {
       if (inside(qpos[joints[i].qpos])) R[joints[i].dof * np + i] = -smooth_sign(qvel[joints[i].dof], smooth);
   }
   std::string config() const {
-    return "lower=" + exact(lower) + " upper=" + exact(upper) + " level=" + exact_list(theta) + " smooth=" + exact(smooth);
+    return "lower=" + exact_text(lower) + " upper=" + exact_text(upper) + " level=" + exact_list(theta) + " smooth=" + exact_text(smooth);
   }
   void compute(const mjModel* m, const mjData* d, mjtNum* qfrc) const { compute_linear(*this, m, d, qfrc); }
 

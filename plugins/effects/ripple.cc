@@ -48,7 +48,7 @@ struct Ripple {
       amp.push_back(std::hypot(theta[i], theta[i + 1]));
       phase.push_back(std::atan2(theta[i + 1], theta[i]));
     }
-    return "gear=" + exact(gear) + " harmonics=" + exact_list(harmonics) + " amplitudes=" + exact_list(amp) +
+    return "gear=" + exact_text(gear) + " harmonics=" + exact_list(harmonics) + " amplitudes=" + exact_list(amp) +
            " phases=" + exact_list(phase);
   }
   void regressor(const mjModel*, const mjtNum* qpos, const mjtNum*, mjtNum* R) const {

@@ -37,7 +37,7 @@ struct Stribeck {
   }
   std::string config() const {
     return "fc=" + exact_list(every(theta, 0, 2)) + " fs=" + exact_list(every(theta, 1, 2)) + " vs=" + exact_list(vs) +
-           " smooth=" + exact(smooth);
+           " smooth=" + exact_text(smooth);
   }
   void compute(const mjModel* m, const mjData* d, mjtNum* qfrc) const { compute_linear(*this, m, d, qfrc); }
 

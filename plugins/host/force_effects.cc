@@ -50,6 +50,21 @@ std::string check_force_plugin(const void* entry) {
 
 }  // namespace
 
+std::vector<std::pair<std::string, std::string>> parse_config_words(const std::string& text, const std::string& where) {
+  std::vector<std::pair<std::string, std::string>> out;
+  std::istringstream words(text);
+  std::set<std::string> seen;
+  for (std::string word; words >> word;) {
+    const auto eq = word.find('=');
+    if (eq == std::string::npos || eq == 0 || eq + 1 == word.size())
+      throw PluginError(where + ": '" + word + "' is not of the form key=value");
+    std::string key = word.substr(0, eq);
+    if (!seen.insert(key).second) throw PluginError(where + ": key '" + key + "' given twice");
+    out.emplace_back(std::move(key), word.substr(eq + 1));
+  }
+  return out;
+}
+
 std::vector<PluginDeclaration> parse_plugin_declarations(const mjModel* m, const std::string& source) {
   std::vector<PluginDeclaration> out;
   for (int i = 0; i < m->ntext; ++i) {
@@ -60,15 +75,7 @@ std::vector<PluginDeclaration> parse_plugin_declarations(const mjModel* m, const
     decl.instance = name.substr(std::string(kPrefix).size());
     const std::string where = source + ": " + decl.element;
     if (decl.instance.empty()) throw PluginError(where + ": the instance name after 'spml.plugin.' is empty");
-    std::istringstream words(std::string(m->text_data + m->text_adr[i]));
-    std::string word;
-    std::set<std::string> seen;
-    while (words >> word) {
-      auto eq = word.find('=');
-      if (eq == std::string::npos || eq == 0 || eq + 1 == word.size())
-        throw PluginError(where + ": '" + word + "' is not of the form key=value");
-      std::string key = word.substr(0, eq), value = word.substr(eq + 1);
-      if (!seen.insert(key).second) throw PluginError(where + ": key '" + key + "' given twice");
+    for (auto& [key, value] : parse_config_words(m->text_data + m->text_adr[i], where)) {
       if (key == "type")
         decl.type = value;
       else if (key == "joints") {

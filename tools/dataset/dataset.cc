@@ -177,6 +177,17 @@ std::string join_list(const std::vector<std::string>& items, char sep) {
   return out;
 }
 
+Split Split::slice(Eigen::Index begin, Eigen::Index end, const std::string& name_of_slice) const {
+  Split s;
+  s.name = name_of_slice;
+  s.x_columns = x_columns;
+  s.y_columns = y_columns;
+  s.X = X.middleRows(begin, end - begin);
+  s.Y = Y.middleRows(begin, end - begin);
+  if (t.size()) s.t = t.segment(begin, end - begin);
+  return s;
+}
+
 int Split::x_index(const std::string& column) const {
   for (size_t i = 0; i < x_columns.size(); ++i)
     if (x_columns[i] == column) return static_cast<int>(i);

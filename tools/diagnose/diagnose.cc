@@ -21,6 +21,7 @@
 #include "spml/envs/mjcf_regressor.h"
 #include "spml/force_effects.h"
 #include "spml/matrix_file.h"
+#include "spml/parse.h"
 
 namespace spml {
 namespace {
@@ -68,6 +69,17 @@ std::string fmt(double v, int precision = 4) {
   return s.str();
 }
 
+// Evidence for the larger of two nested fits (Bayesian information criterion, n equations,
+// dk more parameters): positive when the drop of the residual sum of squares pays for them.
+double delta_bic(double n, double rss_smaller, double rss_larger, double dk) {
+  return n * std::log(rss_smaller / std::max(rss_larger, 1e-300)) - dk * std::log(n);
+}
+
+// The held-out test: the residual sum of squares falls by at least the fraction min_gain.
+bool gains_on_test(double rss_before, double rss_after, double min_gain) {
+  return rss_before > 0 && (rss_before - rss_after) / rss_before >= min_gain;
+}
+
 std::string integer_text(double v) { return std::to_string(static_cast<long long>(std::llround(v))); }
 
 class Diagnosis {
@@ -82,7 +94,7 @@ class Diagnosis {
   std::vector<std::pair<std::string, std::string>> config_of(const Candidate& c, const std::vector<double>& shape) const;
   BlockColumns columns(const PluginInstance& inst, const SplitData& s) const;
   double search_shape(Candidate& c, const Fit& current);
-  std::vector<const BlockColumns*> blocks(const std::vector<int>& causes, bool base_free, bool test) const;
+  std::vector<const BlockColumns*> blocks(const std::vector<int>& causes, bool base_free) const;
   Fit refit(const std::vector<int>& causes, bool base_free) const;
   Eigen::VectorXd residual_on(const SplitData& s, const std::vector<int>& causes, bool base_free, const Fit& f) const;
   double rss_on(const Eigen::VectorXd& r, const std::vector<int>& outputs, Eigen::Index N) const;
@@ -94,6 +106,13 @@ class Diagnosis {
   nlohmann::json metrics(const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test) const;
   nlohmann::json per_joint(const Eigen::VectorXd& r, Eigen::Index N) const;
   void decide_parameters();
+  // Candidate indices of the causes not superseded, in the order chosen.
+  std::vector<int> kept_effects() const {
+    std::vector<int> out;
+    for (const auto& c : causes_)
+      if (c.superseded_by.empty()) out.push_back(c.candidate);
+    return out;
+  }
   // Relative error (all joints) of a fit on every cross split.
   nlohmann::json cross_errors(const std::vector<int>& causes, bool base_free, const Fit& f) const {
     nlohmann::json out = nlohmann::json::array();
@@ -147,19 +166,9 @@ void Diagnosis::load() {
       // One split only: hold out its last rows, in time order (no shuffling: neighbouring
       // samples of a measured run are nearly equal, a random hold-out would flatter).
       const Eigen::Index n = fit.rows(), k = n - static_cast<Eigen::Index>(std::floor(opt_.holdout * static_cast<double>(n)));
-      auto slice = [&](Eigen::Index b, Eigen::Index e, const std::string& name) {
-        Split s;
-        s.name = name;
-        s.x_columns = fit.x_columns;
-        s.y_columns = fit.y_columns;
-        s.X = fit.X.middleRows(b, e - b);
-        s.Y = fit.Y.middleRows(b, e - b);
-        if (fit.t.size()) s.t = fit.t.segment(b, e - b);
-        return s;
-      };
-      fit_part = slice(0, k, opt_.fit_split);
+      fit_part = fit.slice(0, k, opt_.fit_split);
       test_name_ = opt_.fit_split + "[last " + fmt(100 * opt_.holdout, 3) + "%]";
-      test_part = slice(k, n, test_name_);
+      test_part = fit.slice(k, n, test_name_);
       notes_.push_back("the dataset has one split: its last " + fmt(100 * opt_.holdout, 3) + " % of rows (in time order) are held out as the test split");
     }
   }
@@ -251,7 +260,7 @@ void Diagnosis::find_candidates() {
         break;
       }
       const double v = std::clamp(0.0, k->min, k->max);
-      fixed.emplace_back(k->name, k->type == SPML_VALUE_INTEGER ? integer_text(v) : fmt(v, 17));
+      fixed.emplace_back(k->name, k->type == SPML_VALUE_INTEGER ? integer_text(v) : exact_text(v));
     }
     if (!problem.empty()) {
       not_tried_.push_back({{"effect", name}, {"reason", problem}});
@@ -288,7 +297,7 @@ void Diagnosis::find_candidates() {
 std::vector<std::pair<std::string, std::string>> Diagnosis::config_of(const Candidate& c, const std::vector<double>& shape) const {
   auto config = c.fixed;
   for (size_t k = 0; k < c.shape.size(); ++k)
-    config.emplace_back(c.shape[k]->key, c.shape[k]->integer ? integer_text(shape[k]) : fmt(shape[k], 17));
+    config.emplace_back(c.shape[k]->key, c.shape[k]->integer ? integer_text(shape[k]) : exact_text(shape[k]));
   return config;
 }
 
@@ -360,12 +369,11 @@ double Diagnosis::search_shape(Candidate& c, const Fit& current) {
   }
   std::vector<double> best(ns), point(ns);
   double best_drop = -1;
-  int best_rank = 0;
   std::vector<size_t> idx(ns, 0);
   for (;;) {
     for (size_t k = 0; k < ns; ++k) point[k] = axes[k][idx[k]];
     const Gain g = evaluate(point, nullptr);
-    if (g.rank > 0 && g.rss_drop > best_drop) best_drop = g.rss_drop, best = point, best_rank = g.rank;
+    if (g.rank > 0 && g.rss_drop > best_drop) best_drop = g.rss_drop, best = point;
     size_t k = 0;
     while (k < ns && ++idx[k] == axes[k].size()) idx[k++] = 0;
     if (k == ns) break;
@@ -449,20 +457,18 @@ double Diagnosis::search_shape(Candidate& c, const Fit& current) {
   c.shape_values = best;
   c.gain = evaluate(best, &c.fit_cols);
   c.searched = true;
-  (void)best_rank;
   return c.gain.rss_drop;
 }
 
-std::vector<const BlockColumns*> Diagnosis::blocks(const std::vector<int>& causes, bool base_free, bool test) const {
+std::vector<const BlockColumns*> Diagnosis::blocks(const std::vector<int>& causes, bool base_free) const {
   std::vector<const BlockColumns*> out;
-  if (base_free) out.push_back(test ? &test_.base : &fit_.base);
+  if (base_free) out.push_back(&fit_.base);
   for (int c : causes) out.push_back(&cands_[static_cast<size_t>(c)].fit_cols);
-  (void)test;
   return out;
 }
 
 Fit Diagnosis::refit(const std::vector<int>& causes, bool base_free) const {
-  return fit_blocks(blocks(causes, base_free, false), fit_.y0, true);
+  return fit_blocks(blocks(causes, base_free), fit_.y0, true);
 }
 
 // Residual of a fit on another split (test, cross): the causes' columns evaluated there.
@@ -498,13 +504,7 @@ std::string Diagnosis::refused(int candidate, const Eigen::VectorXd& theta) cons
     inst.set_params(theta);
     const std::string text = inst.config_text();
     if (text.empty()) return "";   // cannot check; the extended model will say it is not written
-    std::vector<std::pair<std::string, std::string>> config;
-    std::istringstream words(text);
-    for (std::string w; words >> w;) {
-      const auto eq = w.find('=');
-      config.emplace_back(w.substr(0, eq), eq == std::string::npos ? "" : w.substr(eq + 1));
-    }
-    PluginInstance again(*c.plugin, reg_->model(), {c.joint}, config, "fitted");
+    PluginInstance again(*c.plugin, reg_->model(), {c.joint}, parse_config_words(text, "fitted"), "fitted");
     return "";
   } catch (const std::exception& e) {
     return e.what();
@@ -512,7 +512,7 @@ std::string Diagnosis::refused(int candidate, const Eigen::VectorXd& theta) cons
 }
 
 void Diagnosis::select() {
-  const double n = static_cast<double>(fit_.y0.size()), log_n = std::log(n);
+  const double n = static_cast<double>(fit_.y0.size());
   std::vector<int> chosen;
   std::set<int> research;   // joints whose candidates need a new shape search
   for (size_t j = 0; j < still_.size(); ++j) research.insert(static_cast<int>(j));
@@ -532,7 +532,7 @@ void Diagnosis::select() {
         c.gain = gain_of(c.fit_cols, current.Q, current.residual);
       if (c.gain.rank == 0 || c.gain.rss_drop <= 0) continue;
       const double dk = c.gain.rank + static_cast<double>(c.shape.size());
-      c.delta_bic = n * std::log(current.rss / std::max(current.rss - c.gain.rss_drop, 1e-300)) - dk * log_n;
+      c.delta_bic = delta_bic(n, current.rss, current.rss - c.gain.rss_drop, dk);
       if (c.delta_bic > opt_.bic_threshold) order.push_back(static_cast<int>(k));
     }
     result_.timings.search += since(t0);
@@ -556,8 +556,7 @@ void Diagnosis::select() {
       if (!refused(order[i], f.coef.tail(f.coef.size() - off)).empty()) continue;
       Eigen::VectorXd rt = residual_on(test_, trial, true, f);
       const auto outs = outputs_of(order[i]);
-      const double before = rss_on(r_test, outs, test_.N), after = rss_on(rt, outs, test_.N);
-      if (before > 0 && (before - after) / before >= opt_.min_gain) {
+      if (gains_on_test(rss_on(r_test, outs, test_.N), rss_on(rt, outs, test_.N), opt_.min_gain)) {
         accepted = order[i];
         next = std::move(f);
         next_test = std::move(rt);
@@ -582,12 +581,11 @@ void Diagnosis::select() {
       if (k != i) without.push_back(causes_[k].candidate);
     }
     const Fit fw = refit(with, true), fo = refit(without, true);
-    const double dbic = n * std::log(fo.rss / std::max(fw.rss, 1e-300)) -
-                        (fw.rank - fo.rank + static_cast<double>(cands_[static_cast<size_t>(causes_[i].candidate)].shape.size())) * log_n;
+    const double dk = fw.rank - fo.rank + static_cast<double>(cands_[static_cast<size_t>(causes_[i].candidate)].shape.size());
     const auto outs = outputs_of(causes_[i].candidate);
-    const double tw = rss_on(residual_on(test_, with, true, fw), outs, test_.N),
-                 to = rss_on(residual_on(test_, without, true, fo), outs, test_.N);
-    return dbic > opt_.bic_threshold && to > 0 && (to - tw) / to >= opt_.min_gain;
+    return delta_bic(n, fo.rss, fw.rss, dk) > opt_.bic_threshold &&
+           gains_on_test(rss_on(residual_on(test_, without, true, fo), outs, test_.N),
+                         rss_on(residual_on(test_, with, true, fw), outs, test_.N), opt_.min_gain);
   };
   auto live = [&](size_t upto) {
     std::vector<size_t> set;
@@ -637,14 +635,12 @@ nlohmann::json Diagnosis::metrics(const Eigen::VectorXd& r_fit, const Eigen::Vec
 }
 
 void Diagnosis::decide_parameters() {
-  const double n = static_cast<double>(fit_.y0.size()), log_n = std::log(n);
-  std::vector<int> effects;
-  for (auto& c : causes_)
-    if (c.superseded_by.empty()) effects.push_back(c.candidate);
+  const std::vector<int> effects = kept_effects();
   const Fit free = refit(effects, true), fixed = refit(effects, false);
-  parameters_delta_bic_ = n * std::log(fixed.rss / std::max(free.rss, 1e-300)) - (free.rank - fixed.rank) * log_n;
-  const double tf = residual_on(test_, effects, true, free).squaredNorm(), tx = residual_on(test_, effects, false, fixed).squaredNorm();
-  parameters_named_ = parameters_delta_bic_ > opt_.bic_threshold && tx > 0 && (tx - tf) / tx >= opt_.min_gain;
+  parameters_delta_bic_ = delta_bic(static_cast<double>(fit_.y0.size()), fixed.rss, free.rss, free.rank - fixed.rank);
+  parameters_named_ = parameters_delta_bic_ > opt_.bic_threshold &&
+                      gains_on_test(residual_on(test_, effects, false, fixed).squaredNorm(),
+                                    residual_on(test_, effects, true, free).squaredNorm(), opt_.min_gain);
 }
 
 
@@ -671,9 +667,7 @@ void Diagnosis::build_report(const std::string& out_dir) {
                    {"still_speed", opt_.still_speed}, {"candidates", cands_.size()}};
   R["baseline"] = metrics(fit_.y0, test_.y0);
 
-  std::vector<int> effects;
-  for (auto& c : causes_)
-    if (c.superseded_by.empty()) effects.push_back(c.candidate);
+  const std::vector<int> effects = kept_effects();
   const bool free = parameters_named_;
   const Fit final_fit = refit(effects, free);
   const Eigen::VectorXd final_test = residual_on(test_, effects, free, final_fit);

@@ -2,7 +2,8 @@
 
 #include <tinyxml2.h>
 
-#include <charconv>
+#include "spml/parse.h"
+
 #include <filesystem>
 #include <functional>
 #include <stdexcept>
@@ -12,12 +13,6 @@ namespace {
 
 namespace fs = std::filesystem;
 using tinyxml2::XMLElement;
-
-std::string exact(double v) {
-  char buf[32];
-  auto r = std::to_chars(buf, buf + sizeof buf, v);
-  return std::string(buf, r.ptr);
-}
 
 // Depth-first search for <tag name="name">.
 XMLElement* find_named(XMLElement* root, const char* tag, const std::string& name) {
@@ -72,7 +67,7 @@ std::string write_extended_mjcf(const std::string& model_path, const MjcfEdits& 
       notes.push_back("joint '" + joint + "' is not defined in " + model_path + " itself (an included file?): its corrected values are not written");
       continue;
     }
-    for (const auto& [attr, value] : attrs) e->SetAttribute(attr.c_str(), exact(value).c_str());
+    for (const auto& [attr, value] : attrs) e->SetAttribute(attr.c_str(), exact_text(value).c_str());
   }
   for (const auto& in : edits.inertials) {
     XMLElement* body = find_named(root, "body", in.body);
@@ -82,10 +77,10 @@ std::string write_extended_mjcf(const std::string& model_path, const MjcfEdits& 
     }
     while (XMLElement* old = body->FirstChildElement("inertial")) body->DeleteChild(old);
     XMLElement* inertial = doc.NewElement("inertial");
-    inertial->SetAttribute("mass", exact(in.mass).c_str());
-    inertial->SetAttribute("pos", (exact(in.pos[0]) + " " + exact(in.pos[1]) + " " + exact(in.pos[2])).c_str());
+    inertial->SetAttribute("mass", exact_text(in.mass).c_str());
+    inertial->SetAttribute("pos", (exact_text(in.pos[0]) + " " + exact_text(in.pos[1]) + " " + exact_text(in.pos[2])).c_str());
     std::string full;
-    for (int k = 0; k < 6; ++k) full += (k ? " " : "") + exact(in.fullinertia[k]);
+    for (int k = 0; k < 6; ++k) full += (k ? " " : "") + exact_text(in.fullinertia[k]);
     inertial->SetAttribute("fullinertia", full.c_str());
     body->InsertFirstChild(inertial);
   }

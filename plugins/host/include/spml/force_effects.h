@@ -33,6 +33,10 @@ struct PluginDeclaration {
   std::vector<std::pair<std::string, std::string>> config;   // everything but type/joints
 };
 
+// Splits "key=value key=value" (a declaration's data, a write_config text) into pairs;
+// throws PluginError prefixed with `where` for a word without '=' or a key given twice.
+std::vector<std::pair<std::string, std::string>> parse_config_words(const std::string& text, const std::string& where);
+
 // Parses the declarations of a compiled model; `source` (the MJCF path) prefixes messages.
 std::vector<PluginDeclaration> parse_plugin_declarations(const mjModel* m, const std::string& source);
 

@@ -35,6 +35,8 @@ struct Split {
   // Index of a column by name, or -1.
   int x_index(const std::string& column) const;
   int y_index(const std::string& column) const;
+  // Rows [begin, end) as a split called `name` (same columns, time stamps if any).
+  Split slice(Eigen::Index begin, Eigen::Index end, const std::string& name) const;
 };
 
 // The parametric model the data was made with (root group "model"). All fields optional.

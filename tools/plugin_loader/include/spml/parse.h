@@ -1,9 +1,11 @@
-// The one place text becomes numbers in spml: whole strings only (no trailing junk),
+// The one place text becomes numbers in spml (and, for values written to be read back, the
+// way back): whole strings only (no trailing junk),
 // finite values only, clear messages. Used by the CLI, the dataset import, learner and
 // plugin configuration, so that "1e3", " 5" or "abc" mean the same everywhere.
 #pragma once
 
 #include <cerrno>
+#include <charconv>
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
@@ -58,6 +60,13 @@ inline std::optional<std::vector<double>> parse_numbers(const std::string& text)
     if (comma == std::string::npos) return out;
     pos = comma + 1;
   }
+}
+
+// The shortest text that parse_number reads back to exactly v (written configurations).
+inline std::string exact_text(double v) {
+  char buf[32];
+  const auto r = std::to_chars(buf, buf + sizeof buf, v);
+  return std::string(buf, r.ptr);
 }
 
 }  // namespace spml
