@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs the Debian 12 packages spml needs to build, test and run its tools.
 # Idempotent: packages already installed are skipped, and apt is not touched at all
-# when nothing is missing. Pass --with-torch to add LibTorch (only for torch learners).
+# when nothing is missing. --without-torch leaves out LibTorch (then build with
+# -DSPML_WITH_TORCH=OFF: everything but the BNN/BaMbANN learners).
 set -euo pipefail
 
 packages=(
@@ -13,11 +14,13 @@ packages=(
   libtinyxml2-dev                      # editing MJCF files (spml diagnose writes the extended model)
   libopenblas-dev                      # LAPACK for the GP learners
   libgtest-dev libgmock-dev libbenchmark-dev
+  libtorch-dev                         # BNN, BaMbANN (learners/torch)
   python3-h5py python3-numpy python3-scipy python3-sklearn python3-matplotlib
+  python3-torch                        # the PyTorch peer of the BNN benchmark
 )
 for arg in "$@"; do
   case "$arg" in
-    --with-torch) packages+=(libtorch-dev) ;;
+    --without-torch) packages=("${packages[@]/libtorch-dev}"); packages=("${packages[@]/python3-torch}") ;;
     *) echo "install-deps.sh: unknown option '$arg'" >&2; exit 2 ;;
   esac
 done

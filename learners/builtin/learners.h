@@ -1,9 +1,10 @@
 // The learners of the built-in library (named as the paper's table rows).
 #pragma once
 
-#include "builtin.h"
+#include "spml/learner_adapter.h"
 
 namespace spml::builtin {
+using namespace spml::adapter;
 
 spml_learner lls_learner();
 spml_learner lls_prior_learner();

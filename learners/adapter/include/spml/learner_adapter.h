@@ -1,6 +1,6 @@
-// The C++ side of the built-in learner library: each learner is a class with fit/predict
-// on Eigen views; make_learner<T>() wraps it in the C ABI of spml/learner.h, turning
-// exceptions into error messages so nothing unwinds across the boundary.
+// The C++ side of spml's learner libraries (built-in, torch): each learner is a class with
+// fit/predict on Eigen views; make_learner<T>() wraps it in the C ABI of spml/learner.h,
+// turning exceptions into error messages so nothing unwinds across the boundary.
 #pragma once
 
 #include <Eigen/Core>
@@ -13,7 +13,7 @@
 #include "spml/learner.h"
 #include "spml/row_matrix.h"
 
-namespace spml::builtin {
+namespace spml::adapter {
 
 using ConstRowMap = Eigen::Map<const RowMatrix>;
 
@@ -87,4 +87,4 @@ spml_learner make_learner(const char* name, const char* summary, uint32_t flags,
                       &Adapter<T>::coefficients, &Adapter<T>::destroy};
 }
 
-}  // namespace spml::builtin
+}  // namespace spml::adapter
