@@ -6,9 +6,13 @@
 
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
+#include <fstream>
 #include <random>
+#include <sstream>
 
 #include "bayes_net.h"
+#include "test_util.h"
 
 using spml::RowMatrix;
 using spml::torch_learners::BayesNet;
@@ -192,6 +196,37 @@ TEST(Bnn, RefusesBadData) {
   EXPECT_THROW(net.fit(x, y, RowMatrix(0, 0), Eigen::VectorXd()), std::runtime_error);
   std::vector<double> m(3);
   EXPECT_THROW(net.predict(x, RowMatrix(0, 0), m.data(), nullptr), std::runtime_error);   // before fit
+}
+
+// Through the plugin host: listed, composed with LLS as the paper's LLS-BNN, and each
+// repetition a new seed (std over repetitions is not 0).
+TEST(TorchLearners, ListedComposedAndRepeatedWithNewSeeds) {
+  namespace fs = std::filesystem;
+  auto r = spml::test::run(spml::test::spml_bin() + " learners");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("BNN\t"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("BaMbANN\t"), std::string::npos) << r.output;
+  const fs::path dir = spml::test::temp_dir("torch-bench");
+  r = spml::test::run(spml::test::spml_bin() + " generate --scenario toy --out " + (dir / "toy.h5").string() + " --quiet");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = spml::test::run(spml::test::spml_bin() + " bench --data " + (dir / "toy.h5").string() + " --out " +
+                      (dir / "b").string() + " --learners LLS-BNN,BaMbANN --reps 2 --set steps=300");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  std::ifstream csv(dir / "b" / "results.csv");
+  std::string line;
+  int rows = 0;
+  while (std::getline(csv, line)) {
+    if (line.find(",LLS-BNN,") == std::string::npos && line.find(",BaMbANN,") == std::string::npos) continue;
+    ++rows;
+    std::stringstream ss(line);
+    std::vector<std::string> f;
+    for (std::string c; std::getline(ss, c, ',');) f.push_back(c);
+    ASSERT_GE(f.size(), 13u) << line;
+    EXPECT_GT(std::stod(f[5]), 0.0) << "rmse std over two seeds: " << line;   // rmsestd
+    EXPECT_TRUE(std::isfinite(std::stod(f[8]))) << "nllh: " << line;         // nllhmean
+    EXPECT_EQ(f[12], "2") << line;                                            // fits
+  }
+  EXPECT_EQ(rows, 4);   // two learners x two test splits
 }
 
 }  // namespace
