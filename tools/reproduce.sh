@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Reproduces the paper's tables and prints them beside the published ones.
-#   tools/reproduce.sh            quick: Toy (every learner, 5 repetitions) and SimDyn-Ll
-#                                 (8 learners, 1000 of the 5000 training rows); ~1 min on 2 cores
+#   tools/reproduce.sh            quick: Toy (every learner incl. BNN rows, 5 repetitions) and SimDyn-Ll
+#                                 (8 learners, 1000 of the 5000 training rows); ~4 min on 2 cores
 #   tools/reproduce.sh --full     every scenario, every learner, all training rows (hours)
 # Results go to out/ (datasets) and out/bench/<scenario>/ (results.csv, predictions.h5);
 # an interrupted run continues where it stopped when started again.

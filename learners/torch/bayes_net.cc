@@ -412,6 +412,10 @@ Eigen::VectorXd BayesNet::noise_var() const {
   return out;
 }
 
+double BayesNet::noise_floor_var(Eigen::Index output) const {
+  return impl_->opt.noise_floor * impl_->y_scale[output] * impl_->y_scale[output];
+}
+
 int BayesNet::epochs_run() const { return impl_->epochs_run; }
 double BayesNet::final_loss() const { return impl_->final_loss; }
 

@@ -53,6 +53,7 @@ class BayesNet {
   Eigen::VectorXd theta_mean() const;   // posterior of the model path (empty without one)
   Eigen::VectorXd theta_std() const;
   Eigen::VectorXd noise_var() const;    // observation variance per output, target units^2
+  double noise_floor_var(Eigen::Index output) const;   // noise_floor in target units^2
   int epochs_run() const;
   double final_loss() const;            // negative ELBO per row at the end, scaled units
 

@@ -52,13 +52,6 @@ BayesNetOptions options_from(const Config& c, Eigen::Index outputs, bool model_p
   return o;
 }
 
-std::string number_text(double v) {
-  std::ostringstream s;
-  s.precision(3);
-  s << v;
-  return s.str();
-}
-
 template <bool kModelPath>
 class BayesLearner : public adapter::Learner {
  public:
@@ -72,11 +65,13 @@ class BayesLearner : public adapter::Learner {
     }
     net_ = std::make_unique<BayesNet>(options_from(config, d.outputs, kModelPath));
     net_->fit(d.X, d.Y, d.phi, prior);
+    // notes are warnings (spml compare marks them): only what a user should look at.
     const Eigen::VectorXd noise = net_->noise_var();
-    notes = std::to_string(net_->epochs_run()) + " epochs, final loss/row " + number_text(net_->final_loss()) +
-            ", calibrated noise std";
-    for (Eigen::Index o = 0; o < noise.size(); ++o) notes += " " + number_text(std::sqrt(noise[o]));
-    if (kModelPath && !model.prior) notes += "; theta started from zeros (the dataset has no prior)";
+    for (Eigen::Index o = 0; o < noise.size(); ++o)
+      if (config.number("obs_var", 0) <= 0 && noise[o] <= net_->noise_floor_var(o))
+        notes += (notes.empty() ? "" : "; ") + std::string("output ") + std::to_string(o) +
+                 ": calibrated noise at its floor (the network interpolates the training rows)";
+    if (kModelPath && !model.prior) notes += (notes.empty() ? "" : "; ") + std::string("theta started from zeros (the dataset has no prior)");
   }
   void predict(const View& q, double* mean, double* var) const override {
     if (!net_) throw std::runtime_error("predict before fit");
