@@ -23,6 +23,5 @@ const std::vector<spml_learner>& all() {
 extern "C" SPML_EXPORT int32_t spml_learner_abi_version(void) { return SPML_LEARNER_ABI_VERSION; }
 
 extern "C" SPML_EXPORT const spml_learner* spml_learner_get(int32_t index) {
-  const auto& list = spml::builtin::all();
-  return index >= 0 && static_cast<size_t>(index) < list.size() ? &list[static_cast<size_t>(index)] : nullptr;
+  return spml::adapter::learner_at(spml::builtin::all(), index);
 }

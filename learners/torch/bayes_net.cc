@@ -67,8 +67,8 @@ struct Block {
 class PosteriorBuilder {
  public:
   Block add(Tensor start_mu, double prior_std, Tensor prior_mean) {
-    Block b{offset_, start_mu.size(0), start_mu.numel() / start_mu.size(0)};
-    if (start_mu.dim() == 1) b = Block{offset_, 1, start_mu.size(0)};
+    const int64_t rows = start_mu.dim() == 1 ? 1 : start_mu.size(0);
+    const Block b{offset_, rows, start_mu.numel() / rows};
     mu_.push_back(start_mu.reshape({-1}));
     prior_mu_.push_back(prior_mean.reshape({-1}).expand({start_mu.numel()}));
     prior_sigma_.push_back(torch::full({start_mu.numel()}, prior_std, kFloat));
@@ -115,6 +115,14 @@ class ThreadScope {
   int previous_;
 };
 
+// Per column: the RMS of M - centre; 1 where that is 0 (a constant column) or not finite.
+Eigen::RowVectorXd column_scale(const Eigen::Ref<const RowMatrix>& M, const Eigen::RowVectorXd& centre) {
+  Eigen::RowVectorXd scale = ((M.rowwise() - centre).array().square().colwise().mean()).sqrt();
+  for (Eigen::Index j = 0; j < scale.size(); ++j)
+    if (!(scale[j] > 0)) scale[j] = 1.0;
+  return scale;
+}
+
 Tensor to_tensor(const Eigen::Ref<const RowMatrix>& m) {
   return torch::from_blob(const_cast<double*>(m.data()), {m.rows(), m.cols()}, torch::kFloat64)
       .to(torch::kFloat32)
@@ -129,7 +137,6 @@ struct BayesNet::Impl {
   std::vector<Layer> layers;
   Block theta;                    // model path (1 x params): whitened coefficients v, theta = whiten v
   Tensor log_noise, fixed_noise;  // observation variance, scaled target units
-  Tensor learned_noise;           // what training learned, before recalibration (for the notes)
   Eigen::RowVectorXd x_mean, x_scale, y_mean, y_scale;
   Eigen::MatrixXd whiten;         // params x params
   Eigen::Index inputs = 0, outputs = 0, params = 0;
@@ -170,6 +177,40 @@ struct BayesNet::Impl {
     Tensor weighted = dense ? opt.kl_weight * kl.slice(0, 0, dense_size).sum() : torch::zeros({}, kFloat);
     if (opt.model_path) weighted = weighted + kl.slice(0, dense_size).sum();
     return {h, weighted};
+  }
+
+  // Prediction from scaled inputs x and scaled regressor phi: `samples` whole weight draws,
+  // their mean and variance plus `noise` (scaled units), written unscaled into mean and var
+  // (rows x outputs; var may be null).
+  void predict_scaled(const Tensor& x, const Tensor& phi, const Tensor& noise, double* mean, double* var) const {
+    torch::NoGradGuard no_grad;
+    // Draws depend on the seed only, so predicting the same rows twice gives the same numbers.
+    at::Generator gen = at::detail::createCPUGenerator(opt.seed ^ 0x5bd1e995u);
+    const int64_t S = std::max(1, opt.samples), n = x.size(0);
+    const Tensor draws = q.mu + q.sigma() * at::randn({S, q.size()}, gen, kFloat);   // S x weights
+    const Tensor U = opt.model_path ? theta.of_draws(draws).view({S, params}) : Tensor();
+    for (int64_t s = 0; s < n; s += kPredictChunk) {
+      const int64_t e = std::min<int64_t>(n, s + kPredictChunk), c = e - s;
+      Tensor h = x.slice(0, s, e).unsqueeze(0).expand({S, c, inputs});
+      for (size_t i = 0; i < layers.size(); ++i) {
+        h = torch::baddbmm(layers[i].b.of_draws(draws), h, layers[i].w.of_draws(draws));
+        if (i + 1 < layers.size()) h = torch::elu(h);
+      }
+      if (opt.model_path)   // (c*outputs x params)(params x S) -> S x c x outputs
+        h = h + torch::mm(phi.slice(0, s, e).reshape({c * outputs, params}), U.t())
+                    .view({c, outputs, S})
+                    .permute({2, 0, 1});
+      const Tensor mu = h.mean(0).to(torch::kFloat64).contiguous();
+      const Tensor v = (h.var(0, /*unbiased=*/true) + noise).to(torch::kFloat64).contiguous();
+      const double* mp = mu.data_ptr<double>();
+      const double* vp = v.data_ptr<double>();
+      for (int64_t i = 0; i < c; ++i)
+        for (Eigen::Index o = 0; o < outputs; ++o) {
+          const int64_t k = i * outputs + o, out = (s + i) * outputs + o;
+          mean[out] = mp[k] * y_scale[o] + y_mean[o];
+          if (var) var[out] = vp[k] * y_scale[o] * y_scale[o];
+        }
+    }
   }
 
   Tensor scaled_inputs(const Eigen::Ref<const RowMatrix>& X) const {
@@ -214,18 +255,9 @@ void BayesNet::fit(const Eigen::Ref<const RowMatrix>& X, const Eigen::Ref<const 
   // Standard scaling. The dense-only network also centres the targets; with a model path
   // the targets are only divided by their RMS, so that theta keeps its physical meaning.
   m.x_mean = X.colwise().mean();
-  m.x_scale = ((X.rowwise() - m.x_mean).array().square().colwise().mean()).sqrt();
-  for (Eigen::Index j = 0; j < m.inputs; ++j)
-    if (!(m.x_scale[j] > 0)) m.x_scale[j] = 1.0;
-  if (o.model_path) {
-    m.y_mean = Eigen::RowVectorXd::Zero(m.outputs);
-    m.y_scale = Y.array().square().colwise().mean().sqrt();
-  } else {
-    m.y_mean = Y.colwise().mean();
-    m.y_scale = ((Y.rowwise() - m.y_mean).array().square().colwise().mean()).sqrt();
-  }
-  for (Eigen::Index j = 0; j < m.outputs; ++j)
-    if (!(m.y_scale[j] > 0)) m.y_scale[j] = 1.0;
+  m.x_scale = column_scale(X, m.x_mean);
+  m.y_mean = o.model_path ? Eigen::RowVectorXd::Zero(m.outputs) : Eigen::RowVectorXd(Y.colwise().mean());
+  m.y_scale = column_scale(Y, m.y_mean);
   const Tensor x = m.scaled_inputs(X);
   const Tensor y = to_tensor((Y.rowwise() - m.y_mean).array().rowwise() / m.y_scale.array());
 
@@ -327,11 +359,9 @@ void BayesNet::fit(const Eigen::Ref<const RowMatrix>& X, const Eigen::Ref<const 
   // counted the spread twice (noise std 0.98 learned, 0.5 true). Recalibrate: observation
   // variance = mean squared training residual of the predictive mean minus the mean model
   // variance, per output, not below the floor.
-  if (!m.fixed_noise.defined() || o.obs_var <= 0) {
-    const Tensor noise_before = m.noise().detach();
-    m.fixed_noise = torch::zeros({m.outputs}, kFloat);   // predict() then reports the model variance alone
+  if (o.obs_var <= 0) {
     std::vector<double> mean(static_cast<size_t>(n * m.outputs)), var(mean.size());
-    predict(X, phi, mean.data(), var.data());
+    m.predict_scaled(x, phi_t, torch::zeros({m.outputs}, kFloat), mean.data(), var.data());   // model variance alone
     Eigen::VectorXd calibrated(m.outputs);
     for (Eigen::Index j = 0; j < m.outputs; ++j) {
       double residual = 0, model = 0;
@@ -342,7 +372,6 @@ void BayesNet::fit(const Eigen::Ref<const RowMatrix>& X, const Eigen::Ref<const 
       }
       calibrated[j] = std::max(o.noise_floor, (residual - model) / static_cast<double>(n));
     }
-    m.learned_noise = noise_before;
     m.fixed_noise = torch::from_blob(calibrated.data(), {m.outputs}, torch::kFloat64).to(torch::kFloat32).clone();
   }
 }
@@ -358,37 +387,8 @@ void BayesNet::predict(const Eigen::Ref<const RowMatrix>& X, const Eigen::Ref<co
     throw std::runtime_error("query regressor is " + std::to_string(phi.rows()) + " x " + std::to_string(phi.cols()) +
                              ", expected " + std::to_string(n * m.outputs) + " x " + std::to_string(m.params));
   ThreadScope threads(m.opt.threads);
-  torch::NoGradGuard no_grad;
-  // Draws depend on the seed only, so predicting the same rows twice gives the same numbers.
-  at::Generator gen = at::detail::createCPUGenerator(m.opt.seed ^ 0x5bd1e995u);
-  const int64_t S = std::max(1, m.opt.samples);
-  const Tensor draws = m.q.mu + m.q.sigma() * at::randn({S, m.q.size()}, gen, kFloat);   // S x weights
-  const Tensor x = m.scaled_inputs(X);
-  const Tensor phi_t = m.opt.model_path ? m.scaled_regressor(phi, n, m.whiten) : Tensor();
-  const Tensor U = m.opt.model_path ? m.theta.of_draws(draws).view({S, m.params}) : Tensor();
-  const Tensor noise = m.noise().detach();
-  for (int64_t s = 0; s < n; s += kPredictChunk) {
-    const int64_t e = std::min<int64_t>(n, s + kPredictChunk), c = e - s;
-    Tensor h = x.slice(0, s, e).unsqueeze(0).expand({S, c, m.inputs});
-    for (size_t i = 0; i < m.layers.size(); ++i) {
-      h = torch::baddbmm(m.layers[i].b.of_draws(draws), h, m.layers[i].w.of_draws(draws));
-      if (i + 1 < m.layers.size()) h = torch::elu(h);
-    }
-    if (m.opt.model_path)   // (c*outputs x params)(params x S) -> S x c x outputs
-      h = h + torch::mm(phi_t.slice(0, s, e).reshape({c * m.outputs, m.params}), U.t())
-                  .view({c, m.outputs, S})
-                  .permute({2, 0, 1});
-    const Tensor mu = h.mean(0).to(torch::kFloat64).contiguous();
-    const Tensor v = (h.var(0, /*unbiased=*/true) + noise).to(torch::kFloat64).contiguous();
-    const double* mp = mu.data_ptr<double>();
-    const double* vp = v.data_ptr<double>();
-    for (int64_t i = 0; i < c; ++i)
-      for (Eigen::Index o = 0; o < m.outputs; ++o) {
-        const int64_t k = i * m.outputs + o, out = (s + i) * m.outputs + o;
-        mean[out] = mp[k] * m.y_scale[o] + m.y_mean[o];
-        if (var) var[out] = vp[k] * m.y_scale[o] * m.y_scale[o];
-      }
-  }
+  m.predict_scaled(m.scaled_inputs(X), m.opt.model_path ? m.scaled_regressor(phi, n, m.whiten) : Tensor(),
+                   m.noise().detach(), mean, var);
 }
 
 Eigen::VectorXd BayesNet::theta_mean() const {

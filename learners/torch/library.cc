@@ -63,12 +63,13 @@ class BayesLearner : public adapter::Learner {
       prior = model.prior ? Eigen::Map<const Eigen::VectorXd>(model.prior, model.params).eval()
                           : Eigen::VectorXd::Zero(model.params);
     }
-    net_ = std::make_unique<BayesNet>(options_from(config, d.outputs, kModelPath));
+    const BayesNetOptions options = options_from(config, d.outputs, kModelPath);
+    net_ = std::make_unique<BayesNet>(options);
     net_->fit(d.X, d.Y, d.phi, prior);
     // notes are warnings (spml compare marks them): only what a user should look at.
     const Eigen::VectorXd noise = net_->noise_var();
     for (Eigen::Index o = 0; o < noise.size(); ++o)
-      if (config.number("obs_var", 0) <= 0 && noise[o] <= net_->noise_floor_var(o))
+      if (options.obs_var <= 0 && noise[o] <= net_->noise_floor_var(o))
         notes += (notes.empty() ? "" : "; ") + std::string("output ") + std::to_string(o) +
                  ": calibrated noise at its floor (the network interpolates the training rows)";
     if (kModelPath && !model.prior) notes += (notes.empty() ? "" : "; ") + std::string("theta started from zeros (the dataset has no prior)");
@@ -121,6 +122,5 @@ const std::vector<spml_learner>& all() {
 extern "C" SPML_EXPORT int32_t spml_learner_abi_version(void) { return SPML_LEARNER_ABI_VERSION; }
 
 extern "C" SPML_EXPORT const spml_learner* spml_learner_get(int32_t index) {
-  const auto& list = spml::torch_learners::all();
-  return index >= 0 && static_cast<size_t>(index) < list.size() ? &list[static_cast<size_t>(index)] : nullptr;
+  return spml::adapter::learner_at(spml::torch_learners::all(), index);
 }

@@ -9,6 +9,7 @@
 #include <map>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "spml/learner.h"
 #include "spml/row_matrix.h"
@@ -85,6 +86,11 @@ spml_learner make_learner(const char* name, const char* summary, uint32_t flags,
   return spml_learner{SPML_LEARNER_ABI_VERSION, name, summary, flags, keys,
                       &Adapter<T>::fit, &Adapter<T>::predict, &Adapter<T>::notes,
                       &Adapter<T>::coefficients, &Adapter<T>::destroy};
+}
+
+// spml_learner_get's contract over a library's list: the index-th learner, NULL past the end.
+inline const spml_learner* learner_at(const std::vector<spml_learner>& list, int32_t index) {
+  return index >= 0 && static_cast<size_t>(index) < list.size() ? &list[static_cast<size_t>(index)] : nullptr;
 }
 
 }  // namespace spml::adapter
