@@ -18,15 +18,17 @@ packages=(
   python3-h5py python3-numpy python3-scipy python3-sklearn python3-matplotlib
   python3-torch                        # the PyTorch peer of the BNN benchmark
 )
+without_torch=0
 for arg in "$@"; do
   case "$arg" in
-    --without-torch) packages=("${packages[@]/libtorch-dev}"); packages=("${packages[@]/python3-torch}") ;;
+    --without-torch) without_torch=1 ;;
     *) echo "install-deps.sh: unknown option '$arg'" >&2; exit 2 ;;
   esac
 done
 
 missing=()
 for p in "${packages[@]}"; do
+  [ "$without_torch" = 1 ] && case "$p" in libtorch-dev|python3-torch) continue ;; esac
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
 done
 if [ ${#missing[@]} -eq 0 ]; then
