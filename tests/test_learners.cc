@@ -10,6 +10,7 @@
 #include "spml/envs/scenarios.h"
 #include "spml/learners/compare.h"
 #include "spml/learners/evaluate.h"
+#include "spml/matrix_file.h"
 #include "test_util.h"
 
 namespace {
@@ -252,6 +253,82 @@ TEST(Bench, ResumesFinishedUnitsAndRefitsWhatChanged) {
   EXPECT_EQ(fifth.units_run, 1);
   EXPECT_EQ(fifth.units_cached, 1);
   EXPECT_FALSE(fs::exists(o.out + "/units/LLS/rep0.h5.tmp-999999999"));
+}
+
+// Shards: every unit is fitted by exactly one shard, and the merge gives the unsharded
+// run's numbers (all but the fit times) and the same predictions.
+TEST(Bench, ShardsMergeToTheUnshardedRun) {
+  LearnerRegistry reg;
+  reg.add_default_path();
+  reg.add(std::string(SPML_TEST_LEARNER_DIR) + "/random_features.so");   // seeded: one unit per repetition
+  const fs::path dir = test::temp_dir("bench-shards");
+  BenchOptions o;
+  o.data = scenario_file("toy");
+  o.learners = {"LLS", "GP", "RandomFeatures", "LLS-RandomFeatures"};   // 1 + 1 + 3 + 3 units
+  o.reps = 3;
+  o.config.values = {{"max_evals", "60"}, {"features", "40"}};
+  o.out = (dir / "all").string();
+  const BenchReport whole = run_bench(reg, o);
+  ASSERT_TRUE(whole.failed.empty());
+  ASSERT_EQ(whole.units_run, 8);
+
+  std::vector<std::string> shard_dirs;
+  int fitted = 0;
+  for (int k = 1; k <= 3; ++k) {
+    BenchOptions s = o;
+    s.shard = k;
+    s.shards = 3;
+    s.out = (dir / ("shard" + std::to_string(k))).string();
+    const BenchReport r = run_bench(reg, s);
+    EXPECT_EQ(r.units_run + r.units_elsewhere, 8);
+    EXPECT_GE(r.units_run, 2);   // round robin: 3, 3, 2
+    fitted += r.units_run;
+    shard_dirs.push_back(s.out);
+  }
+  EXPECT_EQ(fitted, 8);
+
+  try {   // a missing shard is named
+    merge_bench(reg, {shard_dirs[0], shard_dirs[2]}, (dir / "bad").string(), nullptr);
+    FAIL();
+  } catch (const LearnerError& e) {
+    EXPECT_NE(std::string(e.what()).find("shard(s) 2/3 not given"), std::string::npos) << e.what();
+  }
+  const std::string merged = (dir / "merged").string();
+  const BenchReport m = merge_bench(reg, shard_dirs, merged, nullptr);
+  EXPECT_EQ(m.units_run, 0);
+  EXPECT_EQ(m.units_cached, 8);
+
+  auto a = results_by_key(o.out), b = results_by_key(merged);
+  ASSERT_EQ(a.size(), b.size());
+  ASSERT_EQ(a.size(), 2u * 4u);   // 2 test splits x 4 learners, one output
+  for (const auto& [key, r] : a) {
+    ASSERT_TRUE(b.count(key)) << key;
+    EXPECT_EQ(r.rmse_mean, b[key].rmse_mean) << key;
+    EXPECT_EQ(r.rmse_std, b[key].rmse_std) << key;
+    EXPECT_EQ(r.nllh_mean, b[key].nllh_mean) << key;
+    EXPECT_EQ(r.fits, b[key].fits) << key;
+  }
+  EXPECT_GT(a["test_interp/0/RandomFeatures"].rmse_std, 0.0);   // the repetitions really differ
+  const MatrixFile pa = read_matrix_file(o.out + "/predictions.h5"), pb = read_matrix_file(merged + "/predictions.h5");
+  ASSERT_EQ(pa.matrices.size(), pb.matrices.size());
+  for (const auto& [key, mat] : pa.matrices) {
+    ASSERT_TRUE(pb.matrices.count(key)) << key;
+    EXPECT_TRUE(mat == pb.matrices.at(key)) << key;
+  }
+
+  // Shards of another run are refused, naming the field.
+  BenchOptions other = o;
+  other.seed = 2;
+  other.shard = 2;
+  other.shards = 3;
+  other.out = (dir / "other2").string();
+  run_bench(reg, other);
+  try {
+    merge_bench(reg, {shard_dirs[0], other.out, shard_dirs[2]}, (dir / "bad2").string(), nullptr);
+    FAIL();
+  } catch (const LearnerError& e) {
+    EXPECT_NE(std::string(e.what()).find("'seed' differs"), std::string::npos) << e.what();
+  }
 }
 
 TEST(Bench, RejectsConfigBeforeAnyFit) {

@@ -17,6 +17,7 @@ packages=(
   libtorch-dev                         # BNN, BaMbANN (learners/torch)
   python3-h5py python3-numpy python3-scipy python3-sklearn python3-matplotlib
   python3-torch                        # the PyTorch peer of the BNN benchmark
+  parallel                             # tools/grid.sh: the sharded grid on one machine
 )
 without_torch=0
 for arg in "$@"; do

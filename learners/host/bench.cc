@@ -1,10 +1,12 @@
 // spml bench: selection, data preparation, unit keys, fitting and aggregation, each a step.
 #include <signal.h>
+#include <unistd.h>
 
 #include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <iomanip>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -54,6 +56,35 @@ class Hasher {
 
  private:
   uint64_t h_ = 1469598103934665603ull;
+};
+
+constexpr const char* kManifestFormat = "spml-bench/3";
+
+// "elapsed, ETA" after each fitted unit: the mean time of the units fitted so far times the
+// units of this run still to fit (units found done take no time and are not counted).
+class Progress {
+ public:
+  explicit Progress(int units) : left_(units), start_(std::chrono::steady_clock::now()) {}
+  void skip() { --left_; }
+  std::string done() {
+    --left_;
+    ++fitted_;
+    const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+    if (left_ <= 0) return "  (" + clock(elapsed) + " elapsed)";
+    return "  (" + clock(elapsed) + " elapsed, ETA " + clock(elapsed / fitted_ * left_) + ")";
+  }
+
+ private:
+  static std::string clock(double seconds) {
+    const long s = std::lround(seconds);
+    std::ostringstream out;
+    if (s >= 3600) out << s / 3600 << " h " << (s % 3600) / 60 << " min";
+    else if (s >= 60) out << s / 60 << " min " << s % 60 << " s";
+    else out << s << " s";
+    return out.str();
+  }
+  int left_, fitted_ = 0;
+  std::chrono::steady_clock::time_point start_;
 };
 
 // One split as the learners see it, its columns in the train split's order.
@@ -297,6 +328,8 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bo
     if (o.log) o.log(s);
   };
   if (o.reps < 1) throw LearnerError("--reps must be >= 1");
+  if (o.shards < 1 || o.shard < 1 || o.shard > o.shards)
+    throw LearnerError("--shard " + std::to_string(o.shard) + "/" + std::to_string(o.shards) + ": expected K/N with 1 <= K <= N");
   const Dataset ds = read_dataset(o.data);
   const Split& train_split = ds.get("train");
   std::unique_ptr<ParametricModel> model;
@@ -328,11 +361,24 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bo
 
   fs::create_directories(o.out);
   remove_stale_temporaries(o.out, o.log);
-  // Provenance for people; reuse is decided per unit by its key.
-  nlohmann::json manifest{{"format", "spml-bench/2"}, {"data", fs::absolute(o.data).string()}, {"data_key", dkey},
-                          {"model", model ? model->name() : std::string()}, {"seed", o.seed}, {"reps", o.reps},
-                          {"train_max", o.train_max}, {"test_max", o.test_max}};
-  for (const auto& [k, v] : o.config.values) manifest["config"][k] = v;
+  // Provenance for people, and what `spml merge` needs to redo the run's aggregation;
+  // reuse is decided per unit by its key.
+  nlohmann::json config = nlohmann::json::array();
+  for (const auto& [k, v] : o.config.values) config.push_back({k, v});   // in order: unit keys hash it so
+  nlohmann::json names = nlohmann::json::array();
+  for (const auto& l : learners) names.push_back(l.name);
+  nlohmann::json manifest{{"format", kManifestFormat},
+                          {"data", fs::absolute(o.data).string()},
+                          {"data_key", dkey},
+                          {"model", model ? model->name() : std::string()},
+                          {"model_file", o.model.empty() ? std::string() : fs::absolute(o.model).string()},
+                          {"learners", names},
+                          {"seed", o.seed},
+                          {"reps", o.reps},
+                          {"train_max", o.train_max},
+                          {"test_max", o.test_max},
+                          {"config", config},
+                          {"shard", std::to_string(o.shard) + "/" + std::to_string(o.shards)}};
   write_text_atomic((fs::path(o.out) / "bench.json").string(), manifest.dump(2) + "\n");
 
   const std::string scenario = scenario_name(ds, o.data);
@@ -353,6 +399,14 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bo
     predictions.matrices[parts[pi].name + "/rows"] = idx;
   }
 
+  // Units in run order; unit u belongs to shard u % shards + 1.
+  int total_units = 0, mine = 0;
+  for (const auto& l : learners) total_units += (l.flags & SPML_LEARNER_DETERMINISTIC) ? 1 : o.reps;
+  for (int u = 0; u < total_units; ++u) mine += u % o.shards == o.shard - 1;
+  if (o.shards > 1) log("shard " + std::to_string(o.shard) + "/" + std::to_string(o.shards) + ": " + std::to_string(mine) +
+                        " of " + std::to_string(total_units) + " units");
+  Progress progress(mine);
+  int unit_number = -1;
   for (size_t li = 0; li < learners.size(); ++li) {
     const std::string& name = learners[li].name;
     const bool deterministic = learners[li].flags & SPML_LEARNER_DETERMINISTIC;
@@ -360,6 +414,7 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bo
     const int fits = deterministic ? 1 : o.reps;
     std::vector<MatrixFile> units;
     for (int rep = 0; rep < fits; ++rep) {
+      const bool in_shard = ++unit_number % o.shards == o.shard - 1;
       LearnerConfig config = o.config;
       config.seed = o.seed + static_cast<std::uint64_t>(rep);
       const std::string path = unit_path(o.out, name, rep);
@@ -369,8 +424,18 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bo
       std::string why;
       if (auto u = read_unit(path, key, &why)) {
         ++report.units_cached;
-        log(tag.str() + ": done earlier");
+        if (in_shard) {
+          progress.skip();
+          log(tag.str() + ": done earlier");
+        }
         units.push_back(std::move(*u));
+        continue;
+      }
+      if (o.reuse_only)
+        throw LearnerError("unit " + name + " rep " + std::to_string(rep + 1) + " (" + path + ") " +
+                           (why.empty() ? "is missing" : why) + ": was its shard run to the end?");
+      if (!in_shard) {
+        ++report.units_elsewhere;
         continue;
       }
       log(tag.str() + (why.empty() ? "" : ": earlier unit " + why + "; refitting") + ": fitting on " +
@@ -379,10 +444,12 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bo
         std::string summary;
         units.push_back(fit_unit(*learner, parts, lm, config, key, path, &summary));
         ++report.units_run;
-        log(tag.str() + ": " + summary + (learner->notes().empty() ? "" : "  [" + learner->notes() + "]"));
+        log(tag.str() + ": " + summary + (learner->notes().empty() ? "" : "  [" + learner->notes() + "]") +
+            progress.done());
       } catch (const std::exception& e) {
         report.failed.push_back(name + ": " + e.what());
         log(tag.str() + ": FAILED: " + e.what());
+        unit_number += fits - rep - 1;   // keeps the numbering of later learners' units
         break;
       }
     }
@@ -394,6 +461,97 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bo
   write_text_atomic((fs::path(o.out) / "results.csv").string(), csv);
   write_matrix_file((fs::path(o.out) / "predictions.h5").string(), predictions);
   return report;
+}
+
+namespace {
+
+nlohmann::json read_manifest(const std::string& dir) {
+  const std::string path = (fs::path(dir) / "bench.json").string();
+  if (!fs::exists(path)) throw LearnerError(dir + ": no bench.json (not an spml bench output folder)");
+  nlohmann::json m;
+  try {
+    std::ifstream in(path);
+    m = nlohmann::json::parse(in);
+  } catch (const nlohmann::json::exception& e) {
+    throw LearnerError(path + ": not valid JSON: " + e.what());
+  }
+  if (m.value("format", std::string()) != kManifestFormat)
+    throw LearnerError(path + ": format '" + m.value("format", std::string("?")) + "', merge needs '" + kManifestFormat +
+                       "' (rerun the shard with this spml)");
+  return m;
+}
+
+// "K/N" -> {K, N}; throws naming the folder.
+std::pair<int, int> shard_of(const nlohmann::json& m, const std::string& dir) {
+  const std::string s = m.value("shard", std::string());
+  const auto slash = s.find('/');
+  const auto k = slash == std::string::npos ? std::nullopt : parse_integer(s.substr(0, slash), 1, 1 << 20);
+  const auto n = slash == std::string::npos ? std::nullopt : parse_integer(s.substr(slash + 1), 1, 1 << 20);
+  if (!k || !n || *k > *n) throw LearnerError(dir + "/bench.json: shard '" + s + "' is not K/N");
+  return {static_cast<int>(*k), static_cast<int>(*n)};
+}
+
+// Copies the file unless an identical path already holds it; atomic (temp file + rename).
+void copy_unit(const fs::path& from, const fs::path& to) {
+  std::error_code ec;
+  if (fs::exists(to) && fs::equivalent(from, to, ec)) return;
+  fs::create_directories(to.parent_path());
+  const fs::path tmp = to.string() + ".tmp-" + std::to_string(::getpid());
+  fs::copy_file(from, tmp, fs::copy_options::overwrite_existing);
+  fs::rename(tmp, to);
+}
+
+}  // namespace
+
+BenchReport merge_bench(const LearnerRegistry& registry, const std::vector<std::string>& shard_dirs, const std::string& out,
+                        const std::function<void(const std::string&)>& log) {
+  if (shard_dirs.empty()) throw LearnerError("merge: no shard folders given");
+  const nlohmann::json first = read_manifest(shard_dirs.front());
+  const int shards = shard_of(first, shard_dirs.front()).second;
+  std::vector<std::string> owner(static_cast<size_t>(shards));
+  for (const auto& dir : shard_dirs) {
+    const nlohmann::json m = read_manifest(dir);
+    for (const char* field : {"data_key", "data", "model_file", "learners", "seed", "reps", "train_max", "test_max", "config"})
+      if (m.value(field, nlohmann::json()) != first.value(field, nlohmann::json()))
+        throw LearnerError("merge: " + dir + "/bench.json: '" + field + "' differs from " + shard_dirs.front() +
+                           "'s (" + m.value(field, nlohmann::json()).dump() + " vs " +
+                           first.value(field, nlohmann::json()).dump() + "): not shards of one run");
+    const auto [k, n] = shard_of(m, dir);
+    if (n != shards) throw LearnerError("merge: " + dir + " is shard " + std::to_string(k) + "/" + std::to_string(n) +
+                                        ", " + shard_dirs.front() + " one of " + std::to_string(shards));
+    if (!owner[static_cast<size_t>(k - 1)].empty())
+      throw LearnerError("merge: " + dir + " and " + owner[static_cast<size_t>(k - 1)] + " are both shard " +
+                         std::to_string(k) + "/" + std::to_string(n));
+    owner[static_cast<size_t>(k - 1)] = dir;
+  }
+  std::string missing;
+  for (int k = 0; k < shards; ++k)
+    if (owner[static_cast<size_t>(k)].empty()) missing += (missing.empty() ? "" : ", ") + std::to_string(k + 1) + "/" + std::to_string(shards);
+  if (!missing.empty()) throw LearnerError("merge: shard(s) " + missing + " not given");
+
+  for (const auto& dir : shard_dirs) {
+    const fs::path units = fs::path(dir) / "units";
+    if (!fs::exists(units)) continue;
+    for (const auto& e : fs::recursive_directory_iterator(units)) {
+      const std::string name = e.path().filename().string();
+      if (!e.is_regular_file() || e.path().extension() != ".h5" || name.find(".tmp-") != std::string::npos) continue;
+      copy_unit(e.path(), fs::path(out) / "units" / fs::relative(e.path(), units));
+    }
+  }
+
+  BenchOptions o;
+  o.data = first.at("data").get<std::string>();
+  o.model = first.at("model_file").get<std::string>();
+  o.learners = first.at("learners").get<std::vector<std::string>>();
+  o.seed = first.at("seed").get<std::uint64_t>();
+  o.reps = first.at("reps").get<int>();
+  o.train_max = first.at("train_max").get<Eigen::Index>();
+  o.test_max = first.at("test_max").get<Eigen::Index>();
+  for (const auto& kv : first.at("config")) o.config.values.emplace_back(kv.at(0).get<std::string>(), kv.at(1).get<std::string>());
+  o.out = out;
+  o.log = log;
+  o.reuse_only = true;
+  return run_bench(registry, o);
 }
 
 }  // namespace spml

@@ -33,6 +33,7 @@ void add_bench(CLI::App& app) {
   auto train_max = std::make_shared<std::string>("all");
   auto test_max = std::make_shared<std::string>("5000");
   auto model = std::make_shared<std::string>();
+  auto shard = std::make_shared<std::string>("1/1");
   cmd->add_option("--data", *data, "spml/1 dataset")->required();
   cmd->add_option("--model", *model, "MJCF whose regressor is the parametric model (default: the dataset's own)");
   cmd->add_option("--plugin-path", *plugin_paths, "Extra force-plugin library or folder (also $SPML_PLUGIN_PATH)");
@@ -46,8 +47,13 @@ void add_bench(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--test-max", *test_max, "Score at most this many rows per test split, evenly strided, or 'all'")
       ->capture_default_str();
+  cmd->add_option("--shard", *shard,
+                  "K/N: fit only the K-th of N deterministic slices of the (learner, repetition) units; "
+                  "combine the N output folders with spml merge")
+      ->capture_default_str();
   cmd->callback([=] {
     BenchOptions o;
+    std::tie(o.shard, o.shards) = shard_option("--shard", *shard);
     o.seed = seed_option("--seed", *seed);
     o.train_max = row_cap_option("--train-max", *train_max);
     o.test_max = row_cap_option("--test-max", *test_max);
@@ -68,12 +74,36 @@ void add_bench(CLI::App& app) {
     const BenchReport r = run_bench(registry, o, *learners == "all");
     for (const auto& s : r.skipped) std::cerr << "skipped " << s << "\n";
     std::cout << "wrote " << *out << "/results.csv and " << *out << "/predictions.h5 (" << r.units_run << " fits run, "
-              << r.units_cached << " reused)\n";
+              << r.units_cached << " reused";
+    if (o.shards > 1)
+      std::cout << "; shard " << o.shard << "/" << o.shards << ": the results hold only learners whose units all ran here, "
+                << r.units_elsewhere << " units belong to other shards: combine with spml merge";
+    std::cout << ")\n";
     if (!r.failed.empty()) {
       std::string all;
       for (const auto& f : r.failed) all += "\n  " + f;
       throw LearnerError(std::to_string(r.failed.size()) + " learner(s) failed:" + all);
     }
+  });
+}
+
+void add_merge(CLI::App& app) {
+  auto* cmd = app.add_subcommand("merge", "Combine the output folders of a sharded spml bench into one, as if unsharded");
+  auto dirs = std::make_shared<std::vector<std::string>>();
+  auto out = std::make_shared<std::string>();
+  auto paths = std::make_shared<std::vector<std::string>>();
+  auto plugin_paths = std::make_shared<std::vector<std::string>>();
+  cmd->add_option("dirs", *dirs, "Output folders of spml bench --shard 1/N .. N/N")->required();
+  cmd->add_option("--out", *out, "Folder for the merged results.csv, predictions.h5 and units/")->required();
+  cmd->add_option("--learner-path", *paths, kPathHelp);
+  cmd->add_option("--plugin-path", *plugin_paths, "Extra force-plugin library or folder (also $SPML_PLUGIN_PATH)");
+  cmd->callback([=] {
+    add_plugin_paths(*plugin_paths);
+    LearnerRegistry registry;
+    load_learners(registry, *paths);
+    const BenchReport r = merge_bench(registry, *dirs, *out, [](const std::string& line) { std::cerr << line << std::endl; });
+    std::cout << "wrote " << *out << "/results.csv and " << *out << "/predictions.h5 from " << r.units_cached << " units of "
+              << dirs->size() << " shard folders\n";
   });
 }
 

@@ -5,6 +5,8 @@
 #include <CLI/CLI.hpp>
 #include <cstdint>
 #include <string>
+#include <utility>
+#include <vector>
 
 namespace spml::cli {
 
@@ -14,6 +16,7 @@ void add_generate(CLI::App& app);
 void add_regressor(CLI::App& app);
 void add_identify(CLI::App& app);
 void add_bench(CLI::App& app);
+void add_merge(CLI::App& app);
 void add_compare(CLI::App& app);
 void add_learners(CLI::App& app);
 void add_plugins(CLI::App& app);
@@ -22,6 +25,8 @@ void add_diagnose(CLI::App& app);
 // Option values that CLI11 would convert too leniently ("-1" into 2^64-1) are taken as
 // text and parsed here, with messages naming the option.
 std::uint64_t seed_option(const std::string& option, const std::string& text);
+// "K/N" with 1 <= K <= N.
+std::pair<int, int> shard_option(const std::string& option, const std::string& text);
 // A row cap: a whole number >= 1, or "all" (returned as 0).
 long row_cap_option(const std::string& option, const std::string& text);
 // --plugin-path folders or files, added to the process's force-plugin catalog.

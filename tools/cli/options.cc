@@ -17,6 +17,14 @@ long row_cap_option(const std::string& option, const std::string& text) {
   return static_cast<long>(*v);
 }
 
+std::pair<int, int> shard_option(const std::string& option, const std::string& text) {
+  const auto slash = text.find('/');
+  const auto n = slash == std::string::npos ? std::nullopt : parse_integer(text.substr(slash + 1), 1, 1000000);
+  const auto k = n ? parse_integer(text.substr(0, slash), 1, *n) : std::nullopt;
+  if (!k) throw CLI::ValidationError(option, "'" + text + "': expected K/N with whole numbers 1 <= K <= N");
+  return {static_cast<int>(*k), static_cast<int>(*n)};
+}
+
 void add_plugin_paths(const std::vector<std::string>& paths) {
   for (const auto& p : paths) force_plugins().add(p, true);
 }

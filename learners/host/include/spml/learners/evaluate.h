@@ -35,12 +35,18 @@ struct BenchOptions {
   Eigen::Index train_max = 0;       // 0: all training rows; else an even stride down to at most this
   Eigen::Index test_max = 5000;     // likewise per test split (0: all)
   std::function<void(const std::string&)> log;   // progress lines; may be empty
+  // Sharding: the (learner, repetition) units are numbered in run order and this run fits
+  // only those with number % shards == shard - 1; units of other shards are used when
+  // already present in out/units and left alone otherwise.
+  int shard = 1, shards = 1;
+  bool reuse_only = false;          // fit nothing: every unit must already be in out/units (merge)
 };
 
 struct BenchReport {
   std::vector<std::string> failed;    // "learner: message"
   std::vector<std::string> skipped;   // learners "all" left out, with the reason
   int units_run = 0, units_cached = 0;
+  int units_elsewhere = 0;            // units of other shards not present here
 };
 
 // Runs (or resumes) a benchmark. Every (learner, repetition) unit is kept in out/units with a
@@ -51,6 +57,13 @@ struct BenchReport {
 // anything is fitted or written. results.csv and predictions.h5 are rewritten atomically
 // from the finished units.
 BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& options, bool all_requested = false);
+
+// Builds in `out` what one unsharded `spml bench` would have written, from the shard folders
+// of one sharded run: checks that their bench.json agree (data, settings, learners), copies
+// their units into out/units and aggregates them without fitting anything. Throws naming
+// the folder, field or unit that is missing or disagrees.
+BenchReport merge_bench(const LearnerRegistry& registry, const std::vector<std::string>& shard_dirs,
+                        const std::string& out, const std::function<void(const std::string&)>& log);
 
 // Rows actually used from a split of `rows` rows with a cap of `max` (0 = all): an even stride.
 std::vector<Eigen::Index> strided_rows(Eigen::Index rows, Eigen::Index max);
