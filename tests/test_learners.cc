@@ -121,6 +121,29 @@ TEST(Compare, RankAgreement) {
   EXPECT_EQ(canonical_algo("SPGP-from-zeroes"), "SPGP-from-zeros");
 }
 
+// The scoreboard against the published Toy-Interp table (LLS 1.29, GP 0.52, SVR-GP 0.52,
+// LLS-simulated a reference row): best, rows within 15 %, and the count of tables beaten.
+TEST(Compare, ScoreboardCountsTablesBeaten) {
+  auto row = [](const std::string& algo, double rmse) {
+    ResultRow r;
+    r.scenario = "toy";
+    r.split = "test_interp";
+    r.algo = algo;
+    r.rmse_mean = rmse;
+    r.nllh_mean = 1.0;
+    return r;
+  };
+  const std::string published = std::string(SPML_SOURCE_DIR) + "/data/published";
+  // LLS within 15 % (1.40 vs 1.29), GP not (0.70 vs 0.52); the oracle row is never "best".
+  std::string report = compare_report({row("LLS", 1.40), row("GP", 0.70), row("LLS-simulated", 0.10)}, published);
+  EXPECT_NE(report.find("toy test_interp 0             GP 0.70"), std::string::npos) << report;
+  EXPECT_NE(report.find("1/2"), std::string::npos) << report;
+  EXPECT_NE(report.find("beats the paper's best in 0 of 16 tables (1 run"), std::string::npos) << report;
+  report = compare_report({row("LLS", 1.40), row("GP", 0.45)}, published);
+  EXPECT_NE(report.find("beats the paper's best in 1 of 16 tables (1 run"), std::string::npos) << report;
+  EXPECT_NE(report.find("via-inst test 0               (not run)"), std::string::npos) << report;
+}
+
 // The compositions against the paper's equations worked by hand with separate learners:
 // LLS-GP = LLS(y) + GP(y - LLS(y)) (eqs. 3-5); it-LLS-GP with 2 iterations refits LLS on
 // y - GP1(x) and GP on y - LLS2(x) (eq. 6). Fitting B on y instead of the residual, or

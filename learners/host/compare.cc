@@ -50,6 +50,76 @@ std::string delta(double ours, double paper) {
   return s.str();
 }
 
+// One paper table against our rows of the same (scenario, split, output).
+struct TableScore {
+  std::string our_best, paper_best;
+  double our_rmse = kNaN, paper_rmse = kNaN;
+  int common = 0, within = 0;             // learners in both; of those, RMSE within +-15 % of the paper's
+  double rho = kNaN;                      // Spearman over the common learners (>= 3)
+};
+
+// The paper's reference rows: the model with given (prior / true) coefficients, nothing
+// learnt. Shown in the tables, but not candidates for "best" on either side.
+bool reference_row(const std::string& algo) { return algo == "LLS-prior" || algo == "LLS-simulated"; }
+
+TableScore score_table(const std::vector<const ResultRow*>& rows, const std::map<std::string, ResultRow>& paper) {
+  TableScore s;
+  for (const auto& [algo, p] : paper)
+    if (!reference_row(algo) && std::isfinite(p.rmse_mean) && !(p.rmse_mean >= s.paper_rmse)) {
+      s.paper_rmse = p.rmse_mean;
+      s.paper_best = algo;
+    }
+  std::vector<double> ours, theirs;
+  for (const ResultRow* r : rows) {
+    if (!reference_row(r->algo) && std::isfinite(r->rmse_mean) && !(r->rmse_mean >= s.our_rmse)) {
+      s.our_rmse = r->rmse_mean;
+      s.our_best = r->algo;
+    }
+    auto p = paper.find(r->algo);
+    if (p == paper.end() || !std::isfinite(p->second.rmse_mean)) continue;
+    ++s.common;
+    s.within += std::abs(r->rmse_mean - p->second.rmse_mean) <= 0.15 * p->second.rmse_mean;
+    ours.push_back(r->rmse_mean);
+    theirs.push_back(p->second.rmse_mean);
+  }
+  if (s.common >= 3) s.rho = spearman_rho(ours, theirs);
+  return s;
+}
+
+// Every paper table in one block: our best learner against the paper's best, the rows that
+// agree within 15 %, the rank agreement, and how many tables our best beats the paper's.
+std::string scoreboard(const std::map<std::string, std::string>& table_of, const std::map<std::string, TableScore>& scores) {
+  std::ostringstream out;
+  out << "\n== scoreboard: every paper table (RMSE; best = lowest mean over the repetitions)\n"
+      << std::left << std::setw(30) << "table (scenario split output)" << std::setw(22) << "ours best" << std::setw(22) << "paper best"
+      << std::right << std::setw(10) << "within15%" << std::setw(7) << "rho" << "  beats\n";
+  int beats = 0, tables = 0, run = 0;
+  std::vector<std::string> seen;
+  for (const auto& [key, file] : table_of) {
+    if (std::find(seen.begin(), seen.end(), file) != seen.end()) continue;
+    seen.push_back(file);
+    ++tables;
+    std::string label = key;   // "scenario|split|output" -> "scenario split output"
+    std::replace(label.begin(), label.end(), '|', ' ');
+    auto it = scores.find(file);
+    if (it == scores.end()) {
+      out << std::left << std::setw(30) << label << "(not run)\n";
+      continue;
+    }
+    const TableScore& s = it->second;
+    ++run;
+    const bool win = std::isfinite(s.our_rmse) && s.our_rmse < s.paper_rmse;
+    beats += win;
+    out << std::left << std::setw(30) << label << std::setw(22) << (s.our_best + " " + num(s.our_rmse))
+        << std::setw(22) << (s.paper_best + " " + num(s.paper_rmse)) << std::right << std::setw(10)
+        << (std::to_string(s.within) + "/" + std::to_string(s.common)) << std::setw(7) << num(s.rho) << "  "
+        << (win ? "yes" : "no") << "\n";
+  }
+  out << "our best beats the paper's best in " << beats << " of " << tables << " tables (" << run
+      << " run; LLS-prior/LLS-simulated are reference rows, never 'best')\n";
+  return out.str();
+}
+
 }  // namespace
 
 std::string default_published_dir() { return (fs::path(spml_share_dir()) / "published").string(); }
@@ -95,6 +165,7 @@ std::string compare_report(const std::vector<ResultRow>& results, const std::str
     groups[key].push_back(&r);
   }
   std::ostringstream out;
+  std::map<std::string, TableScore> scores;   // by table file
   for (const auto& key : order) {
     const auto& rows = groups[key];
     const ResultRow& first = *rows.front();
@@ -136,6 +207,7 @@ std::string compare_report(const std::vector<ResultRow>& results, const std::str
       if (!ran) out << std::left << std::setw(18) << a << std::right << std::setw(16) << "(not run)" << std::setw(9)
                     << num(paper[a].rmse_mean) << "\n";
     }
+    if (t != table_of.end()) scores[t->second] = score_table(rows, paper);
     if (common.size() >= 3) {
       auto best = [&](const std::vector<double>& v) {
         return common[static_cast<size_t>(std::min_element(v.begin(), v.end()) - v.begin())];
@@ -152,6 +224,7 @@ std::string compare_report(const std::vector<ResultRow>& results, const std::str
         if (!r->warnings.empty()) out << "  " << r->algo << ": " << r->warnings << "\n";
     }
   }
+  out << scoreboard(table_of, scores);
   return out.str();
 }
 
