@@ -18,6 +18,7 @@ void add_identify(CLI::App& app);
 void add_bench(CLI::App& app);
 void add_merge(CLI::App& app);
 void add_compare(CLI::App& app);
+void add_plot(CLI::App& app);
 void add_learners(CLI::App& app);
 void add_plugins(CLI::App& app);
 void add_diagnose(CLI::App& app);

@@ -31,6 +31,7 @@ int main(int argc, char** argv) {
   spml::cli::add_bench(app);
   spml::cli::add_merge(app);
   spml::cli::add_compare(app);
+  spml::cli::add_plot(app);
   spml::cli::add_learners(app);
   spml::cli::add_plugins(app);
   spml::cli::add_diagnose(app);
