@@ -6,7 +6,8 @@
 namespace spml {
 
 const std::vector<std::string>& scenario_names() {
-  static const std::vector<std::string> names = {"toy", "via-inst", "via-ar", "simdyn-ll", "simdyn-gl"};
+  static const std::vector<std::string> names = {"toy", "via-inst", "via-ar", "simdyn-ll", "simdyn-gl",
+                                                      "simdyn-ll-fresh", "simdyn-gl-fresh"};
   return names;
 }
 
@@ -17,6 +18,8 @@ Dataset generate_scenario(const std::string& name, const GenerateOptions& option
   else if (name == "via-ar") ds = generate_via(true, options);
   else if (name == "simdyn-ll") ds = generate_simdyn(false, options);
   else if (name == "simdyn-gl") ds = generate_simdyn(true, options);
+  else if (name == "simdyn-ll-fresh") ds = generate_simdyn(false, options, true);
+  else if (name == "simdyn-gl-fresh") ds = generate_simdyn(true, options, true);
   else {
     std::string list;
     for (const auto& n : scenario_names()) list += (list.empty() ? "" : ", ") + n;

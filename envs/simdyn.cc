@@ -21,14 +21,21 @@ constexpr double kDuration = 100.0;                     // s per roll-out
 constexpr double kNoise = 1e-6;                         // position noise, uniform +-[rad]
 constexpr int kTrainStride = 10;                        // 1 kHz -> 100 Hz
 
+// Every frequency is a multiple of 0.02 Hz, so the reference repeats every 50 s: the
+// paper's interpolation test (the second 50 s) retraces the training trajectory. The
+// "-fresh" scenarios shift the phases instead, for a new path through the same region.
+constexpr double kFreshPhase1[3] = {1.3, 2.1, 0.7}, kFreshPhase2[3] = {0.4, 2.9, 1.8};   // rad
+
 struct Reference {
   double offset0;
+  bool fresh = false;
   void at(double t, double* q, double* qd, double* qdd) const {
     for (int i = 0; i < 3; ++i) {
-      double w1 = 2 * M_PI * kF1[i], w2 = 2 * M_PI * kF2[i], a = kAmp[i];
-      q[i] = a * std::sin(w1 * t) + a / 3 * std::sin(w2 * t) + (i == 0 ? offset0 : 0.0);
-      qd[i] = a * w1 * std::cos(w1 * t) + a / 3 * w2 * std::cos(w2 * t);
-      qdd[i] = -a * w1 * w1 * std::sin(w1 * t) - a / 3 * w2 * w2 * std::sin(w2 * t);
+      const double w1 = 2 * M_PI * kF1[i], w2 = 2 * M_PI * kF2[i], a = kAmp[i];
+      const double p1 = fresh ? kFreshPhase1[i] : 0.0, p2 = fresh ? kFreshPhase2[i] : 0.0;
+      q[i] = a * std::sin(w1 * t + p1) + a / 3 * std::sin(w2 * t + p2) + (i == 0 ? offset0 : 0.0);
+      qd[i] = a * w1 * std::cos(w1 * t + p1) + a / 3 * w2 * std::cos(w2 * t + p2);
+      qdd[i] = -a * w1 * w1 * std::sin(w1 * t + p1) - a / 3 * w2 * w2 * std::sin(w2 * t + p2);
     }
   }
 };
@@ -38,13 +45,12 @@ struct Rollout {
   Eigen::VectorXd t;
 };
 
-Rollout simulate(const mjModel* sim, ForceEffects& effects, const mjModel* prior, double offset0,
+Rollout simulate(const mjModel* sim, ForceEffects& effects, const mjModel* prior, Reference ref,
                  std::mt19937_64& rng, const GenerateOptions& options, const std::string& stage) {
   const double h = sim->opt.timestep;
   const int steps = static_cast<int>(std::lround(kDuration / h));
   const int n = steps + 2 * signals::kEdge;   // extra samples each side for the differences
   DataPtr d = make_data(sim), dc = make_data(prior);
-  Reference ref{offset0};
   double qr[3], qdr[3], qddr[3];
   // Start on the reference so the controller has no transient to catch up.
   ref.at(-signals::kEdge * h, qr, qdr, qddr);
@@ -119,7 +125,7 @@ std::string declarations_text(const ForceEffects& fx) {
 
 }  // namespace
 
-Dataset generate_simdyn(bool global_mismatch, const GenerateOptions& options) {
+Dataset generate_simdyn(bool global_mismatch, const GenerateOptions& options, bool fresh_interp) {
   const std::string file = global_mismatch ? "planar_arm3_gl.xml" : "planar_arm3_ll.xml";
   const std::string path = mjcf_path(file);
   ModelPtr sim = load_mjcf(path);
@@ -131,16 +137,19 @@ Dataset generate_simdyn(bool global_mismatch, const GenerateOptions& options) {
   for (int j = 0; j < sim->njnt; ++j) joints.push_back(mj_id2name(sim.get(), mjOBJ_JOINT, j));
 
   std::mt19937_64 rng(options.seed);
-  const std::string label = global_mismatch ? "simdyn-gl" : "simdyn-ll";
-  Rollout base = simulate(sim.get(), effects, prior.get(), 0.0, rng, options, label + " offset 0.0");
-  Rollout shifted = simulate(sim.get(), effects, prior.get(), 0.3, rng, options, label + " offset 0.3");
+  const std::string label = std::string(global_mismatch ? "simdyn-gl" : "simdyn-ll") + (fresh_interp ? "-fresh" : "");
+  Rollout base = simulate(sim.get(), effects, prior.get(), Reference{0.0}, rng, options, label + " offset 0.0");
+  Rollout shifted = simulate(sim.get(), effects, prior.get(), Reference{0.3}, rng, options, label + " offset 0.3");
+  Rollout fresh;
+  if (fresh_interp) fresh = simulate(sim.get(), effects, prior.get(), Reference{0.0, true}, rng, options, label + " new phases");
   effects.detach();
 
   const Eigen::Index half = base.q.rows() / 2;   // 50 s
   const int ts = std::max(1, options.test_stride);
   Dataset ds;
   ds.splits.push_back(make_split("train", base, 0, half, kTrainStride, joints));
-  ds.splits.push_back(make_split("test_interp", base, half, base.q.rows(), ts, joints));
+  const Rollout& interp = fresh_interp ? fresh : base;
+  ds.splits.push_back(make_split("test_interp", interp, half, interp.q.rows(), ts, joints));
   ds.splits.push_back(make_split("test_extrap", shifted, half, shifted.q.rows(), ts, joints));
 
   ds.model.name = "planar_arm3";
@@ -152,8 +161,10 @@ Dataset generate_simdyn(bool global_mismatch, const GenerateOptions& options) {
   ds.provenance["plugins"] = declarations_text(effects);
   ds.provenance["controller"] = "computed torque with mjcf/planar_arm3_prior.xml, kp=3947.8 kd=125.7, 1 kHz";
   ds.provenance["sensor"] = "q + uniform(+-1e-6 rad); qd, qdd by central differences applied twice at 1 kHz";
-  ds.provenance["sampling"] = "train: first 50 s of offset 0 every 10th sample (100 Hz); test_interp: last 50 s of offset 0; "
-                              "test_extrap: last 50 s of offset 0.3; test stride " + std::to_string(ts);
+  ds.provenance["sampling"] = std::string("train: first 50 s of offset 0 every 10th sample (100 Hz); test_interp: last 50 s of ") +
+                              (fresh_interp ? "offset 0 with new phases (a new path through the training region)"
+                                            : "offset 0 (retraces the training path: the reference repeats every 50 s)") +
+                              "; test_extrap: last 50 s of offset 0.3; test stride " + std::to_string(ts);
   return ds;
 }
 

@@ -224,6 +224,26 @@ TEST(Bench, SimDynLocalBandSpgpBeatsLls) {
   EXPECT_LT(spgp, 0.7 * lls) << "SPGP " << spgp << " LLS " << lls;   // paper 19.07 vs 38.43
 }
 
+// All 5000 training rows (the staged fit: 1000-row subset, then 6 evaluations on all rows).
+// Before the kernel-first start, SPGP extrapolated at 252 Nm on joint 0 here (LLS 35).
+TEST(Bench, SimDynFullDataSpgpExtrapolatesBelowLls) {
+  BenchOptions o;
+  o.data = scenario_file("simdyn-ll");
+  o.learners = {"LLS", "SPGP"};
+  o.test_max = 2000;
+  o.reps = 1;
+  o.out = (test::temp_dir("bench-simdyn-full") / "out").string();
+  const BenchReport r = run_bench(registry(), o);
+  ASSERT_TRUE(r.failed.empty()) << r.failed.front();
+  auto res = results_by_key(o.out);
+  for (int j = 0; j < 3; ++j) {
+    const std::string k = "test_extrap/" + std::to_string(j) + "/";
+    EXPECT_LE(res[k + "SPGP"].rmse_mean, res[k + "LLS"].rmse_mean) << "joint " << j;
+  }
+  EXPECT_LE(res["test_extrap/0/SPGP"].rmse_mean, 24.76);   // the paper's SPGP
+  EXPECT_LT(res["test_interp/0/SPGP"].rmse_mean, 0.5 * res["test_interp/0/LLS"].rmse_mean);
+}
+
 TEST(Bench, ResumesFinishedUnitsAndRefitsWhatChanged) {
   BenchOptions o;
   const fs::path dir = test::temp_dir("bench-resume");

@@ -22,6 +22,11 @@ class GaussianProcess : public Learner {
     options.max_evals = static_cast<int>(config.number("max_evals", options.max_evals));
     options.noise_floor = config.number("noise_floor", options.noise_floor);
     options.learn_mean = kMean != MeanStart::kNone;
+    options.subset_rows = static_cast<int>(config.number("subset_rows", 1000));
+    options.final_evals = static_cast<int>(config.number("final_evals", options.final_evals));
+    // Holding theta at zeros or ones while the kernel is fitted would hand the whole model to
+    // the kernel; only a prior is a start worth fitting the kernel around.
+    options.kernel_first = kMean == MeanStart::kPrior && config.number("kernel_first", 1.0) != 0.0;
     const bool standardize = config.number("standardize", 1.0) != 0.0;
     if (options.max_evals < 1) throw std::runtime_error("max_evals must be >= 1");
     if (!(options.noise_floor > 0)) throw std::runtime_error("noise_floor must be > 0");
@@ -110,6 +115,12 @@ constexpr spml_config_key kGpKeys[] = {
     {"max_evals", SPML_VALUE_INTEGER, 1, 1e9, "1000", "most likelihood evaluations of L-BFGS"},
     {"noise_floor", SPML_VALUE_NUMBER, 1e-300, HUGE_VAL, "1e-6", "lower bound of the noise variance (scaled units)"},
     {"standardize", SPML_VALUE_INTEGER, 0, 1, "1", "1: fit on targets scaled to unit RMS"},
+    {"subset_rows", SPML_VALUE_INTEGER, 0, 1e9, "1000",
+     "above 1.5x this many rows: fit the hyper-parameters on this many strided rows first (0: off)"},
+    {"kernel_first", SPML_VALUE_INTEGER, 0, 1, "1",
+     "SPGP, SPGP-SepKer: 1 fits the kernel with theta at the prior first, then jointly; 0 jointly from the "
+     "start (the paper; always so from zeros/ones)"},
+    {"final_evals", SPML_VALUE_INTEGER, 1, 1e9, "6", "most evaluations on all rows after the subset fit"},
     {nullptr, 0, 0, 0, nullptr, nullptr}};
 
 }  // namespace

@@ -23,7 +23,12 @@ int main(int argc, char** argv) {
   app.add_option("--rows", rows, "Rows for the likelihood evaluation")->capture_default_str();
   app.add_option("--output", output, "Output column for the likelihood evaluation")->capture_default_str();
   app.add_option("--repeats", repeats, "Timed evaluations (the median is reported)")->capture_default_str();
-  app.add_flag("--spgp-fit", spgp_fit, "Also time a full SPGP fit on the whole train split");
+  bool gp_fit = false, spgp_lml = false;
+  app.add_flag("--spgp-fit", spgp_fit, "Also time a full SPGP fit (the learner, defaults) on the whole train split");
+  app.add_flag("--fit", gp_fit, "Also time a zero-mean GP fit to convergence on the --rows rows (targets / RMS), "
+                                 "one stage, as scikit-learn fits (tools/bench/gp_sklearn_peer.py --fit)");
+  app.add_flag("--spgp-lml", spgp_lml, "Also fit SPGP on the whole train split twice through spml::gp: staged "
+                                       "(the default) and one-stage jointly from the start (before 0.3); print time and LML");
   CLI11_PARSE(app, argc, argv);
   try {
     const spml::Dataset ds = spml::read_dataset(data);
@@ -49,6 +54,41 @@ int main(int argc, char** argv) {
     out["grad_norm"] = grad.norm();
     out["lml_grad_seconds"] = times[times.size() / 2];
 
+    auto seconds_since = [](std::chrono::steady_clock::time_point t0) {
+      return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    };
+    if (gp_fit) {
+      Eigen::MatrixXd y = train.Y.topRows(n).col(output);
+      y /= std::sqrt(y.squaredNorm() / static_cast<double>(n));
+      spml::gp::Likelihood scaled(train.X.topRows(n), y);
+      spml::gp::Hyper start;
+      start.lengthscales = Eigen::VectorXd::Ones(train.X.cols());
+      const auto t0 = std::chrono::steady_clock::now();
+      const spml::gp::FitResult r = spml::gp::fit(scaled, start, spml::gp::FitOptions{});
+      out["fit_seconds"] = seconds_since(t0);
+      out["fit_lml"] = r.lml;
+      out["fit_evaluations"] = r.evaluations;
+    }
+    if (spgp_lml) {   // the learner's scaling: targets / their RMS over all outputs, theta from the prior
+      auto model = spml::make_parametric_model(ds, train);
+      const double rms = std::sqrt(train.Y.squaredNorm() / static_cast<double>(train.Y.size()));
+      spml::gp::Hyper start;
+      start.lengthscales = Eigen::VectorXd::Ones(train.X.cols());
+      start.theta = model->prior / rms;
+      for (const bool staged : {true, false}) {
+        spml::gp::Likelihood lik(train.X, Eigen::MatrixXd(train.Y / rms), model->stacked(train.X));
+        spml::gp::FitOptions o;
+        o.learn_mean = true;
+        o.subset_rows = staged ? 1000 : 0;
+        o.kernel_first = staged;
+        const auto t0 = std::chrono::steady_clock::now();
+        const spml::gp::FitResult r = spml::gp::fit(lik, start, o);
+        const std::string key = staged ? "spgp_staged" : "spgp_one_stage";
+        out[key + "_seconds"] = seconds_since(t0);
+        out[key + "_lml"] = r.lml;
+        out[key + "_evaluations"] = r.evaluations + r.subset_evaluations;
+      }
+    }
     if (spgp_fit) {
       spml::LearnerRegistry registry;
       registry.add_default_path();

@@ -41,6 +41,8 @@ class Likelihood {
   Eigen::VectorXd best_theta(const Eigen::VectorXd& p);
   // Largest jitter the Cholesky ladder had to add so far (0 when never needed).
   double max_jitter() const { return max_jitter_; }
+  // The same likelihood over the given rows only (phi's row blocks of every output kept).
+  Likelihood subset(const std::vector<Eigen::Index>& rows) const;
   const Eigen::MatrixXd& X() const { return X_; }
   const Eigen::MatrixXd& Y() const { return Y_; }
   const Eigen::MatrixXd& phi() const { return phi_; }
@@ -60,17 +62,29 @@ struct FitOptions {
   // (best_theta) and L-BFGS resumes, while that raises the LML, at most this many times.
   // L-BFGS alone can stall where a large, smooth kernel has absorbed part of the model.
   int theta_refinements = 3;
+  // With learn_mean: fit the kernel terms first with theta held at its start, then jointly.
+  // Meant for a start that is a model already (a prior): from zeros the kernel takes it all.
+  bool kernel_first = false;
+  // Staged fit for large n (0: off). With n > 1.5 * subset_rows, the hyper-parameters are
+  // first fitted to convergence on an evenly strided subset of subset_rows rows (cheap: the
+  // cost is cubic in n), then refined on all rows with at most final_evals evaluations,
+  // which is where the LML is measured. Prediction always uses every row.
+  int subset_rows = 0;
+  int final_evals = 6;
 };
 
 struct FitResult {
   Hyper hyper;
   double lml = 0.0;
-  int evaluations = 0;
+  int evaluations = 0;                  // on all rows
+  int subset_evaluations = 0;           // on the subset (staged fit only)
+  double subset_lml = 0.0;              // the subset fit's LML (on its own rows)
   std::string stop;                     // NLopt's reason, e.g. "FTOL_REACHED"
   std::vector<std::string> warnings;    // abnormal stops, jitter, failed evaluations
 };
 
-// Maximises the LML from `start` with NLopt's L-BFGS in log space, analytic gradients.
+// Maximises the LML from `start` with NLopt's L-BFGS in log space, analytic gradients
+// (staged through a subset first when options.subset_rows asks for it).
 FitResult fit(Likelihood& lik, const Hyper& start, const FitOptions& options);
 
 // The posterior for fixed hyper-parameters, for prediction.
