@@ -121,6 +121,11 @@ TEST(GaussianProcess, SemiParametricFitRecoversTheta) {
   EXPECT_LT((r.hyper.theta - truth).cwiseAbs().maxCoeff(), 1e-3) << r.hyper.theta.transpose() << " stop " << r.stop;
 }
 
+Hyper coarse_hyper(Hyper h, const Eigen::VectorXd& theta) {
+  h.theta = theta;
+  return h;
+}
+
 // A subset likelihood is the likelihood of those rows: X, Y and every output's phi block.
 TEST(GaussianProcess, SubsetKeepsEveryOutputsRegressorBlock) {
   const int n = 30, O = 2, M = 3;
@@ -165,6 +170,34 @@ TEST(GaussianProcess, StagedFitReachesTheOneStageOptimum) {
   EXPECT_NEAR(r2.lml, r1.lml, 1e-3 * std::abs(r1.lml));
   EXPECT_NEAR(std::log(r2.hyper.lengthscales[0]), std::log(r1.hyper.lengthscales[0]), 0.05);
   EXPECT_NEAR(std::sqrt(r2.hyper.noise_var), 0.1, 0.01);
+}
+
+// With every training row as an inducing input, Q = K and the trace term vanishes: the
+// sparse posterior is the exact one, its theta the exact GLS optimum and its bound the LML.
+TEST(GaussianProcess, SparsePosteriorWithAllRowsInducingIsExact) {
+  const int n = 60, O = 2, M = 3, d = 2;
+  Eigen::MatrixXd X = 2.0 * Eigen::MatrixXd::Random(n, d), phi = Eigen::MatrixXd::Random(O * n, M);
+  Eigen::MatrixXd Y(n, O);
+  const Eigen::Vector3d truth(1.0, -2.0, 0.5);
+  const Eigen::VectorXd mean = phi * truth;
+  for (int o = 0; o < O; ++o) Y.col(o) = mean.segment(o * n, n) + (X.col(0).array() * (o + 1.0)).sin().matrix();
+  Hyper h = some_hyper(d, M);
+  h.noise_var = 0.05;
+  Likelihood lik(X, Y, phi);
+  h.theta = lik.best_theta(pack(h));
+  const spml::gp::SparsePosterior sparse(X, Y, phi, X, h);
+  EXPECT_LT((sparse.theta() - h.theta).cwiseAbs().maxCoeff(), 1e-6);
+  EXPECT_NEAR(sparse.bound(), lik.evaluate(pack(h), nullptr), 1e-5 * std::abs(sparse.bound()));
+  const spml::gp::Posterior exact(lik, h);
+  const Eigen::MatrixXd Xs = 2.5 * Eigen::MatrixXd::Random(25, d), phis = Eigen::MatrixXd::Random(O * 25, M);
+  Eigen::MatrixXd m1, v1, m2, v2;
+  exact.predict(Xs, phis, &m1, &v1);
+  sparse.predict(Xs, phis, &m2, &v2);
+  EXPECT_LT((m1 - m2).cwiseAbs().maxCoeff(), 1e-5);
+  EXPECT_LT((v1 - v2).cwiseAbs().maxCoeff(), 1e-5);
+  // Fewer inducing inputs: the bound lies below the LML (Titsias' bound).
+  const spml::gp::SparsePosterior coarse(X, Y, phi, X.topRows(10), h);
+  EXPECT_LT(coarse.bound(), lik.evaluate(pack(coarse_hyper(h, coarse.theta())), nullptr));
 }
 
 TEST(GaussianProcess, JitterLadderRescuesSingularKernel) {

@@ -224,12 +224,13 @@ TEST(Bench, SimDynLocalBandSpgpBeatsLls) {
   EXPECT_LT(spgp, 0.7 * lls) << "SPGP " << spgp << " LLS " << lls;   // paper 19.07 vs 38.43
 }
 
-// All 5000 training rows (the staged fit: 1000-row subset, then 6 evaluations on all rows).
+// All 5000 training rows (the staged fit: 1000-row subset, then 6 evaluations on all rows),
+// and the sparse learner beside it.
 // Before the kernel-first start, SPGP extrapolated at 252 Nm on joint 0 here (LLS 35).
 TEST(Bench, SimDynFullDataSpgpExtrapolatesBelowLls) {
   BenchOptions o;
   o.data = scenario_file("simdyn-ll");
-  o.learners = {"LLS", "SPGP"};
+  o.learners = {"LLS", "SPGP", "SPGP-Sparse"};
   o.test_max = 2000;
   o.reps = 1;
   o.out = (test::temp_dir("bench-simdyn-full") / "out").string();
@@ -242,6 +243,12 @@ TEST(Bench, SimDynFullDataSpgpExtrapolatesBelowLls) {
   }
   EXPECT_LE(res["test_extrap/0/SPGP"].rmse_mean, 24.76);   // the paper's SPGP
   EXPECT_LT(res["test_interp/0/SPGP"].rmse_mean, 0.5 * res["test_interp/0/LLS"].rmse_mean);
+  // The sparse learner (500 inducing rows) within 10 % of the exact one, or better.
+  for (const char* split : {"test_interp", "test_extrap"})
+    for (int j = 0; j < 3; ++j) {
+      const std::string k = std::string(split) + "/" + std::to_string(j) + "/";
+      EXPECT_LE(res[k + "SPGP-Sparse"].rmse_mean, 1.1 * res[k + "SPGP"].rmse_mean) << k;
+    }
 }
 
 TEST(Bench, ResumesFinishedUnitsAndRefitsWhatChanged) {

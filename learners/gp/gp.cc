@@ -47,8 +47,16 @@ void kernel_lower(const Eigen::MatrixXd& X, const Hyper& h, Eigen::MatrixXd& K, 
   if (Z_out) *Z_out = std::move(Z);
 }
 
-// Cross kernel between query rows Xs (m x d) and training rows X (n x d): n x m.
-Eigen::MatrixXd kernel_cross(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Xs, const Hyper& h) {
+}  // namespace
+
+std::vector<Eigen::Index> strided_rows(Eigen::Index n, Eigen::Index count) {
+  count = std::min(count, n);
+  std::vector<Eigen::Index> rows;
+  for (Eigen::Index i = 0; i < count; ++i) rows.push_back(i * n / count);
+  return rows;
+}
+
+Eigen::MatrixXd cross_kernel(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Xs, const Hyper& h) {
   Eigen::MatrixXd Z = X * h.lengthscales.cwiseInverse().asDiagonal();
   Eigen::MatrixXd Zs = Xs * h.lengthscales.cwiseInverse().asDiagonal();
   Eigen::VectorXd sq = Z.rowwise().squaredNorm(), sqs = Zs.rowwise().squaredNorm();
@@ -58,6 +66,8 @@ Eigen::MatrixXd kernel_cross(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Xs
       K(i, j) = h.signal_var * std::exp(-0.5 * std::max(0.0, sq[i] + sqs[j] - 2.0 * K(i, j)));
   return K;
 }
+
+namespace {
 
 // Residual of Y (n x O) after the mean model.
 Eigen::MatrixXd residual(const Eigen::MatrixXd& Y, const Eigen::MatrixXd& phi, const Eigen::VectorXd& theta) {
@@ -381,10 +391,7 @@ FitResult fit(Likelihood& lik, const Hyper& start, const FitOptions& options) {
   if (options.subset_rows <= 0 || static_cast<double>(n) <= 1.5 * options.subset_rows)
     return fit_once(lik, kernel_first(lik, start, options), options);
   // Evenly strided rows keep the whole trajectory's coverage at a fraction of the density.
-  std::vector<Eigen::Index> rows;
-  const double stride = static_cast<double>(n) / options.subset_rows;
-  for (int i = 0; i < options.subset_rows; ++i) rows.push_back(static_cast<Eigen::Index>(i * stride));
-  Likelihood sub = lik.subset(rows);
+  Likelihood sub = lik.subset(strided_rows(n, options.subset_rows));
   FitOptions first = options;
   first.subset_rows = 0;
   const FitResult coarse = fit_once(sub, kernel_first(sub, start, first), first);
@@ -427,7 +434,7 @@ void Posterior::predict(const Eigen::MatrixXd& Xs, const Eigen::MatrixXd& phi_st
   constexpr Eigen::Index kBlock = 2048;   // bounds the n x block cross-kernel in memory
   for (Eigen::Index start = 0; start < m; start += kBlock) {
     const Eigen::Index b = std::min(kBlock, m - start);
-    Eigen::MatrixXd Ks = kernel_cross(X_, Xs.middleRows(start, b), h_);   // n x b
+    Eigen::MatrixXd Ks = cross_kernel(X_, Xs.middleRows(start, b), h_);   // n x b
     mean->middleRows(start, b) = Ks.transpose() * alpha_;
     if (var) {
       const int bi = static_cast<int>(b);

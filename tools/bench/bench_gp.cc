@@ -24,6 +24,9 @@ int main(int argc, char** argv) {
   app.add_option("--output", output, "Output column for the likelihood evaluation")->capture_default_str();
   app.add_option("--repeats", repeats, "Timed evaluations (the median is reported)")->capture_default_str();
   bool gp_fit = false, spgp_lml = false;
+  std::string sparse_split;
+  app.add_option("--sparse-fit", sparse_split, "Also time SPGP-Sparse fitted on every row of this split "
+                                               "(e.g. test_interp: 50 000 rows of SimDyn)");
   app.add_flag("--spgp-fit", spgp_fit, "Also time a full SPGP fit (the learner, defaults) on the whole train split");
   app.add_flag("--fit", gp_fit, "Also time a zero-mean GP fit to convergence on the --rows rows (targets / RMS), "
                                  "one stage, as scikit-learn fits (tools/bench/gp_sklearn_peer.py --fit)");
@@ -89,20 +92,23 @@ int main(int argc, char** argv) {
         out[key + "_evaluations"] = r.evaluations + r.subset_evaluations;
       }
     }
-    if (spgp_fit) {
+    // A learner (defaults, through the plugin ABI) fitted on every row of one split.
+    auto time_learner = [&](const std::string& name, const spml::Split& split, const std::string& key) {
       spml::LearnerRegistry registry;
       registry.add_default_path();
-      auto learner = registry.create("SPGP");
+      auto learner = registry.create(name);
       auto model = spml::make_parametric_model(ds, train);
-      spml::RowMatrix X = train.X, Y = train.Y, phi = model->stacked(train.X);
+      spml::RowMatrix X = split.X, Y = split.Y, phi = model->stacked(split.X);
       spml::LearnerData d{&X, &Y, &phi, static_cast<int>(Y.cols())};
       spml::LearnerModel m{model->param_names, model->prior, model->truth};
       const auto t0 = std::chrono::steady_clock::now();
       learner->fit(d, m, spml::LearnerConfig{});
-      out["spgp_fit_rows"] = train.rows();
-      out["spgp_fit_seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-      out["spgp_fit_notes"] = learner->notes();
-    }
+      out[key + "_fit_rows"] = split.rows();
+      out[key + "_fit_seconds"] = seconds_since(t0);
+      out[key + "_fit_notes"] = learner->notes();
+    };
+    if (spgp_fit) time_learner("SPGP", train, "spgp");
+    if (!sparse_split.empty()) time_learner("SPGP-Sparse", ds.get(sparse_split), "sparse");
     std::cout << out.dump() << std::endl;
   } catch (const std::exception& e) {
     std::cerr << "bench_gp: error: " << e.what() << "\n";

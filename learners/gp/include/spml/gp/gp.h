@@ -103,6 +103,34 @@ class Posterior {
   double jitter_ = 0.0;
 };
 
+// `count` of n rows, evenly strided from the first (all n when count >= n).
+std::vector<Eigen::Index> strided_rows(Eigen::Index n, Eigen::Index count);
+
+// The ARD RBF kernel between rows of X (n x d) and rows of Xs (m x d): n x m.
+Eigen::MatrixXd cross_kernel(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Xs, const Hyper& h);
+
+// Titsias' (2009) variational sparse GP with the mean model phi . theta, for data an exact
+// GP cannot hold: m inducing inputs Z, the optimal q(u) in closed form, O(n m^2) time and
+// O(m^2 + block * m) memory (the rows are streamed in blocks). The kernel terms of `hyper`
+// are used as given; theta is the maximiser of the collapsed bound (a generalised
+// least-squares solve under Q + sn2 I, Q = K_nm K_mm^-1 K_mn; the trace term does not
+// depend on theta).
+class SparsePosterior {
+ public:
+  SparsePosterior(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y, const Eigen::MatrixXd& phi, Eigen::MatrixXd Z,
+                  const Hyper& hyper);
+  // As Posterior::predict: phi_star (O*m) x M, mean and var (noise included) rows x O.
+  void predict(const Eigen::MatrixXd& Xs, const Eigen::MatrixXd& phi_star, Eigen::MatrixXd* mean,
+               Eigen::MatrixXd* var) const;
+  const Eigen::VectorXd& theta() const { return h_.theta; }
+  double bound() const { return bound_; }   // the collapsed evidence lower bound at theta
+
+ private:
+  Eigen::MatrixXd Z_, L_, LS_, w_;   // chol(K_mm), chol(sn2 I + V V^T), S^-1 V r per output
+  Hyper h_;
+  double bound_ = 0.0;
+};
+
 // Factorises K + noise*I (lower triangle of K used) into `factor` (lower Cholesky factor).
 // A numerically singular matrix is retried with the jitter ladder
 // (sf2 + sn2) * 1e-10, 1e-9, ..., 1e-4 added to the diagonal. Returns the jitter used;
