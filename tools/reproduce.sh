@@ -2,7 +2,8 @@
 # Reproduces the paper's tables and prints them beside the published ones.
 #   tools/reproduce.sh            quick: Toy (every learner incl. BNN rows, 5 repetitions) and SimDyn-Ll
 #                                 (8 learners, 1000 of the 5000 training rows); ~4 min on 2 cores
-#   tools/reproduce.sh --full     every scenario, every learner, all training rows (hours)
+#   tools/reproduce.sh --full     every scenario, every learner, 5 repetitions, all training rows
+#                                 (about 1.5 h on 2 cores; tools/grid.sh spreads it over more)
 # Results go to out/ (datasets) and out/bench/<scenario>/ (results.csv, predictions.h5);
 # an interrupted run continues where it stopped when started again.
 set -euo pipefail
@@ -15,6 +16,7 @@ for arg in "$@"; do
     *) echo "reproduce.sh: unknown option '$arg'" >&2; exit 2 ;;
   esac
 done
+start=$(date +%s)
 mkdir -p out/bench
 results=()
 bench() {   # scenario, then spml bench options
@@ -30,3 +32,4 @@ else
   for s in toy via-inst via-ar simdyn-ll simdyn-gl; do bench "$s" --learners all; done
 fi
 "$spml" compare "${results[@]}"
+echo "reproduce.sh ($mode): total wall time $(( $(date +%s) - start )) s"

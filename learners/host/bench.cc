@@ -201,11 +201,26 @@ std::string data_key(const std::vector<Part>& parts, const Split& train, const L
   return h.hex();
 }
 
+// The bytes of a learner library, hashed once per file and run: a rebuilt learner (new code,
+// same name) invalidates its units instead of silently reusing old numbers.
+std::string library_hash(const std::string& file) {
+  static std::map<std::string, std::string> cache;
+  auto it = cache.find(file);
+  if (it != cache.end()) return it->second;
+  Hasher h;
+  std::ifstream in(file, std::ios::binary);
+  std::vector<char> buf(1 << 16);
+  while (in.read(buf.data(), static_cast<std::streamsize>(buf.size())) || in.gcount() > 0)
+    h.bytes(buf.data(), static_cast<size_t>(in.gcount()));
+  return cache[file] = h.hex();
+}
+
 std::string unit_key(const std::string& data_key, const LearnerRegistry& registry, const std::string& learner,
                      const LearnerConfig& config, std::uint64_t seed) {
   Hasher h;
   h.text(data_key);
   h.text(learner);
+  for (const auto& f : registry.library_files(learner)) h.text(library_hash(f));
   h.bytes(&seed, sizeof seed);
   const auto keys = registry.config_keys(learner);
   for (const auto& [k, v] : config.values)

@@ -146,6 +146,16 @@ std::unique_ptr<Learner> LearnerRegistry::create(const std::string& name) const 
   return make_composition(name, create(a), create(b), iterative);
 }
 
+std::vector<std::string> LearnerRegistry::library_files(const std::string& name) const {
+  if (plugin(name)) return {plugin_file(name)};
+  std::string a, b;
+  bool iterative = false;
+  if (!split_composition(name, &a, &b, &iterative)) return {};
+  std::vector<std::string> files = library_files(a);
+  for (const auto& f : library_files(b)) files.push_back(f);
+  return files;
+}
+
 std::set<std::string> LearnerRegistry::config_keys(const std::string& name) const {
   if (const spml_learner* l = plugin(name)) return key_set(l->config_keys);
   std::string a, b;

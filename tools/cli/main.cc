@@ -5,6 +5,8 @@
 #include <new>
 
 #include "commands.h"
+#include "spml/force_plugin.h"
+#include "spml/learner.h"
 #include "spml/version.h"
 
 namespace {
@@ -22,7 +24,9 @@ int fail(const std::string& message, int code) {
 int main(int argc, char** argv) {
   CLI::App app{"spml: semi-parametric model learning for robot dynamics"};
   app.require_subcommand(1);
-  app.set_version_flag("--version", "spml " SPML_VERSION " (dataset format spml/1, learner ABI 2, force-plugin ABI 2)");
+  app.set_version_flag("--version", "spml " SPML_VERSION " (dataset format spml/1, learner ABI " +
+                                        std::to_string(SPML_LEARNER_ABI_VERSION) + ", force-plugin ABI " +
+                                        std::to_string(SPML_FORCE_PLUGIN_ABI_VERSION) + ")");
   spml::cli::add_info(app);
   spml::cli::add_import(app);
   spml::cli::add_generate(app);

@@ -80,6 +80,8 @@ class LearnerRegistry {
   // comma-separated list; every name is checked.
   std::vector<std::string> expand(const std::string& list) const;
   std::unique_ptr<Learner> create(const std::string& name) const;
+  // The library files the named learner's code comes from (compositions: both parts').
+  std::vector<std::string> library_files(const std::string& name) const;
   // Config keys the named learner accepts (compositions: both parts, plus "iterations").
   std::set<std::string> config_keys(const std::string& name) const;
   // "" if `value` suits key `key` of learner `name` (type and bounds from the learner's key
