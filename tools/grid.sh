@@ -15,7 +15,8 @@
 #   --merge-only  merges and compares what the jobs left (the last step, also on Slurm)
 # tools/slurm/grid.sbatch runs the same jobs as a Slurm job array.
 set -euo pipefail
-cd "${SPML_ROOT:-$(dirname "$0")/..}"
+self=$(realpath "$0")   # the jobs call this script again, after the cd below
+cd "${SPML_ROOT:-$(dirname "$self")/..}"
 spml=${SPML:-build/bin/spml}
 shards=4
 jobs=$(nproc)
@@ -71,7 +72,7 @@ start=$(date +%s)
 if [ "$merge_only" = 0 ]; then
   command -v parallel > /dev/null || { echo "grid.sh: GNU parallel is missing (tools/install-deps.sh installs it)" >&2; exit 1; }
   forward=(--shards "$shards" --out "$out" --data-dir "$data_dir" --scenarios "$scenarios" -- "${bench_options[@]}")
-  seq 1 "$total" | parallel --halt now,fail=1 -j "$jobs" --line-buffer "$0" --task {} "${forward[@]@Q}"
+  seq 1 "$total" | parallel --halt now,fail=1 -j "$jobs" --line-buffer "$self" --task {} "${forward[@]@Q}"
 fi
 # merge loads the same learner and force-plugin libraries as the shards did.
 merge_paths=()
