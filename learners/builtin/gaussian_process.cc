@@ -61,12 +61,12 @@ class GaussianProcess : public Learner {
         if (inducing < 1) throw std::runtime_error("inducing must be >= 1");
         // The kernel from the exact (semi-parametric) fit on a strided subset; then the sparse
         // posterior over all rows, with theta maximising its bound.
-        gp::Likelihood sub = lik->subset(gp::strided_rows(n, options.subset_rows));
+        gp::Likelihood sub = lik->subset(gp::evenly_spaced_rows(n, options.subset_rows));
         gp::FitOptions exact = options;
         exact.subset_rows = 0;
         const gp::FitResult r = gp::fit(sub, first, exact);
         for (const auto& w : r.warnings) add_note("subset fit: " + w);
-        const std::vector<Eigen::Index> z = gp::strided_rows(n, inducing);
+        const std::vector<Eigen::Index> z = gp::evenly_spaced_rows(n, inducing);
         Eigen::MatrixXd Z(static_cast<Eigen::Index>(z.size()), X.cols());
         for (size_t i = 0; i < z.size(); ++i) Z.row(static_cast<Eigen::Index>(i)) = X.row(z[i]);
         sparse_.emplace_back(lik->X(), lik->Y(), lik->phi(), std::move(Z), r.hyper);

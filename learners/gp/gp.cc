@@ -49,7 +49,7 @@ void kernel_lower(const Eigen::MatrixXd& X, const Hyper& h, Eigen::MatrixXd& K, 
 
 }  // namespace
 
-std::vector<Eigen::Index> strided_rows(Eigen::Index n, Eigen::Index count) {
+std::vector<Eigen::Index> evenly_spaced_rows(Eigen::Index n, Eigen::Index count) {
   count = std::min(count, n);
   std::vector<Eigen::Index> rows;
   for (Eigen::Index i = 0; i < count; ++i) rows.push_back(i * n / count);
@@ -276,10 +276,6 @@ double objective(unsigned n, const double* x, double* grad, void* data) {
   return v;
 }
 
-}  // namespace
-
-namespace {
-
 FitResult fit_once(Likelihood& lik, const Hyper& start, const FitOptions& options) {
   const int d = lik.inputs(), M = lik.params();
   Hyper h0 = start;
@@ -365,10 +361,6 @@ FitResult fit_once(Likelihood& lik, const Hyper& start, const FitOptions& option
   return res;
 }
 
-}  // namespace
-
-namespace {
-
 // With a mean model: the kernel terms fitted first with theta held at its start, the joint
 // fit from there. From "everything at 1.0" the LML's gradient in theta dwarfs the kernel's,
 // and a joint L-BFGS moves theta to absorb what the unfitted kernel cannot, into a worse
@@ -391,7 +383,7 @@ FitResult fit(Likelihood& lik, const Hyper& start, const FitOptions& options) {
   if (options.subset_rows <= 0 || static_cast<double>(n) <= 1.5 * options.subset_rows)
     return fit_once(lik, kernel_first(lik, start, options), options);
   // Evenly strided rows keep the whole trajectory's coverage at a fraction of the density.
-  Likelihood sub = lik.subset(strided_rows(n, options.subset_rows));
+  Likelihood sub = lik.subset(evenly_spaced_rows(n, options.subset_rows));
   FitOptions first = options;
   first.subset_rows = 0;
   const FitResult coarse = fit_once(sub, kernel_first(sub, start, first), first);
@@ -400,7 +392,6 @@ FitResult fit(Likelihood& lik, const Hyper& start, const FitOptions& options) {
   last.max_evals = options.final_evals;
   FitResult res = fit_once(lik, coarse.hyper, last);
   res.subset_evaluations = coarse.evaluations;
-  res.subset_lml = coarse.lml;
   static const bool trace = std::getenv("SPML_GP_TRACE") != nullptr;
   if (trace)
     std::fprintf(stderr, "staged fit: subset %d rows, %d evaluations, LML %.6g; all %ld rows, %d evaluations, LML %.6g\n",

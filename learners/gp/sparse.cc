@@ -28,7 +28,7 @@ SparsePosterior::SparsePosterior(const Eigen::MatrixXd& X, const Eigen::MatrixXd
   cholesky_with_jitter(cross_kernel(Z_, Z_, h_), 0.0, h_.signal_var, L_);
   L_.triangularView<Eigen::StrictlyUpper>().setZero();
 
-  Eigen::MatrixXd G = Eigen::MatrixXd::Zero(m, m);                      // V V^T
+  Eigen::MatrixXd S = Eigen::MatrixXd::Zero(m, m);   // V V^T (lower triangle), then + sn2 I
   std::vector<Eigen::VectorXd> Vy(static_cast<size_t>(O), Eigen::VectorXd::Zero(m));
   std::vector<Eigen::MatrixXd> Vphi(static_cast<size_t>(O), Eigen::MatrixXd::Zero(m, M));
   Eigen::MatrixXd PtP = Eigen::MatrixXd::Zero(M, M);
@@ -37,7 +37,7 @@ SparsePosterior::SparsePosterior(const Eigen::MatrixXd& X, const Eigen::MatrixXd
   for (Eigen::Index start = 0; start < n; start += kBlock) {
     const Eigen::Index b = std::min(kBlock, n - start);
     const Eigen::MatrixXd V = lower_solve(L_, cross_kernel(Z_, X.middleRows(start, b), h_));   // m x b
-    G.selfadjointView<Eigen::Lower>().rankUpdate(V);
+    S.selfadjointView<Eigen::Lower>().rankUpdate(V);
     trace_q += V.squaredNorm();
     for (Eigen::Index o = 0; o < O; ++o) {
       const auto y = Y.col(o).segment(start, b);
@@ -50,10 +50,7 @@ SparsePosterior::SparsePosterior(const Eigen::MatrixXd& X, const Eigen::MatrixXd
       Pty += P.transpose() * y;
     }
   }
-  G = G.selfadjointView<Eigen::Lower>();
-  Eigen::MatrixXd S = G;
-  S.diagonal().array() += sn2;
-  cholesky_with_jitter(S, 0.0, sn2, LS_);
+  cholesky_with_jitter(S, sn2, sn2, LS_);   // reads the lower triangle only
   LS_.triangularView<Eigen::StrictlyUpper>().setZero();
   auto S_solve = [&](const Eigen::MatrixXd& B) -> Eigen::MatrixXd { return LS_.transpose().triangularView<Eigen::Upper>().solve(lower_solve(LS_, B)); };
 

@@ -30,6 +30,9 @@ std::uint64_t seed_option(const std::string& option, const std::string& text);
 std::pair<int, int> shard_option(const std::string& option, const std::string& text);
 // A row cap: a whole number >= 1, or "all" (returned as 0).
 long row_cap_option(const std::string& option, const std::string& text);
+// s as one word for /bin/sh (single quotes; a quote inside becomes '\''): the plot
+// scripts are run through std::system.
+std::string shell_quote(const std::string& s);
 // --plugin-path folders or files, added to the process's force-plugin catalog.
 void add_plugin_paths(const std::vector<std::string>& paths);
 

@@ -45,7 +45,7 @@ void add_diagnose(CLI::App& app) {
               << t["rollouts"].get<double>() << " s, load " << t["load"].get<double>() << " s, outputs " << t["outputs"].get<double>() << " s\n";
     if (!*no_plots) {
       const std::string script = (std::filesystem::path(spml_share_dir()) / "plots" / "diagnose_plots.py").string();
-      const std::string command = "/usr/bin/python3 '" + script + "' '" + *out + "'";
+      const std::string command = "/usr/bin/python3 " + shell_quote(script) + " " + shell_quote(*out);
       if (std::system(command.c_str()) != 0)
         std::cerr << "spml: warning: plots not drawn (" << command << " failed; is python3-matplotlib installed?)\n";
     }

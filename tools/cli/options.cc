@@ -25,6 +25,12 @@ std::pair<int, int> shard_option(const std::string& option, const std::string& t
   return {static_cast<int>(*k), static_cast<int>(*n)};
 }
 
+std::string shell_quote(const std::string& s) {
+  std::string q = "'";
+  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return q + "'";
+}
+
 void add_plugin_paths(const std::vector<std::string>& paths) {
   for (const auto& p : paths) force_plugins().add(p, true);
 }

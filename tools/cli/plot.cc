@@ -11,15 +11,6 @@
 #include "spml/plugin_loader.h"
 
 namespace spml::cli {
-namespace {
-
-std::string shell_quote(const std::string& s) {
-  std::string q = "'";
-  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return q + "'";
-}
-
-}  // namespace
 
 void add_plot(CLI::App& app) {
   auto* cmd = app.add_subcommand("plot", "Draw bench results: RMSE/NLLH bars beside the paper's, predictions +-2 sigma, "

@@ -78,7 +78,6 @@ struct FitResult {
   double lml = 0.0;
   int evaluations = 0;                  // on all rows
   int subset_evaluations = 0;           // on the subset (staged fit only)
-  double subset_lml = 0.0;              // the subset fit's LML (on its own rows)
   std::string stop;                     // NLopt's reason, e.g. "FTOL_REACHED"
   std::vector<std::string> warnings;    // abnormal stops, jitter, failed evaluations
 };
@@ -103,8 +102,9 @@ class Posterior {
   double jitter_ = 0.0;
 };
 
-// `count` of n rows, evenly strided from the first (all n when count >= n).
-std::vector<Eigen::Index> strided_rows(Eigen::Index n, Eigen::Index count);
+// Exactly `count` of n rows (all n when count >= n), evenly spaced from the first. (The host's
+// spml::strided_rows caps a split with a whole-number stride instead, often fewer rows.)
+std::vector<Eigen::Index> evenly_spaced_rows(Eigen::Index n, Eigen::Index count);
 
 // The ARD RBF kernel between rows of X (n x d) and rows of Xs (m x d): n x m.
 Eigen::MatrixXd cross_kernel(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Xs, const Hyper& h);
