@@ -10,7 +10,7 @@ packages=(
   libmujoco-dev libqhull-dev          # MuJoCo 2.2.2; its CMake config needs qhull's headers
   libeigen3-dev libnlopt-cxx-dev
   libhdf5-dev libmatio-dev
-  libsvm-dev libcli11-dev nlohmann-json3-dev
+  liblinear-dev libcli11-dev nlohmann-json3-dev
   libtinyxml2-dev                      # editing MJCF files (spml diagnose writes the extended model)
   libopenblas-dev                      # LAPACK for the GP learners
   libgtest-dev libgmock-dev libbenchmark-dev
