@@ -102,30 +102,39 @@ Scores score(const BayesNet& net, const Sample& s) {
 const Eigen::Vector4d kTheta(1.0, -2.0, 0.5, 1.5);
 double linear_model(double x) { return kTheta.dot(Eigen::Vector4d(1.0, x, x * x, std::sin(3 * x))); }
 
+// The BNN's std away from the data: with the default tempering (kl_weight 1e-3, chosen for
+// fit: Toy-Interp 0.95 against 1.04 at 1e-2) the model std grows 1.8x from [-2, 2] to [4, 6];
+// the issue's 2x needs the less tempered kl_weight = 1e-2 (2.4x here), at no cost in fit on
+// this smooth function. Both are asserted, so a change that flattens the uncertainty fails.
 TEST(Bnn, FitsToTheNoiseAndIsUnsureOutsideTheData) {
   const double sigma = 0.1;
   const auto f = [](double x) { return std::sin(2 * x) + 0.5 * x; };
   const Sample train = draw(400, -2, 2, sigma, f, 1), inside = draw(400, -2, 2, sigma, f, 2),
                outside = draw(400, 4, 6, sigma, f, 3);
-  BayesNetOptions o;
-  o.seed = 1;
-  BayesNet net(o);
-  net.fit(train.x, train.y, RowMatrix(0, 0), Eigen::VectorXd());
-  const Scores in = score(net, inside), out = score(net, outside);
-  std::printf("BNN: test RMSE %.4f (noise %.2f), predictive std inside %.4f, outside %.4f, noise std %.4f, "
-              "model std inside %.4f outside %.4f\n",
-              in.rmse, sigma, in.mean_std, out.mean_std, std::sqrt(net.noise_var()[0]), in.model_std, out.model_std);
-  EXPECT_LE(in.rmse, 1.15 * sigma);
-  EXPECT_GE(in.rmse, 0.85 * sigma);   // not below the noise either: that would mean a broken test split
-  // The observation noise is the same everywhere; the model's own uncertainty must grow.
-  // (The issue asks for 2x; the mean-field posterior gives 1.8x here: see README, BNN.)
-  EXPECT_GE(out.model_std, 1.5 * in.model_std);
+  for (const double kl_weight : {1e-3, 1e-2}) {
+    BayesNetOptions o;
+    o.seed = 1;
+    o.kl_weight = kl_weight;
+    BayesNet net(o);
+    net.fit(train.x, train.y, RowMatrix(0, 0), Eigen::VectorXd());
+    const Scores in = score(net, inside), out = score(net, outside);
+    std::printf("BNN kl_weight %g: test RMSE %.4f (noise %.2f), predictive std inside %.4f, outside %.4f, noise std "
+                "%.4f, model std inside %.4f outside %.4f (%.2fx)\n",
+                kl_weight, in.rmse, sigma, in.mean_std, out.mean_std, std::sqrt(net.noise_var()[0]), in.model_std,
+                out.model_std, out.model_std / in.model_std);
+    SCOPED_TRACE("kl_weight " + std::to_string(kl_weight));
+    EXPECT_LE(in.rmse, 1.15 * sigma);
+    EXPECT_GE(in.rmse, 0.85 * sigma);   // not below the noise either: that would mean a broken test split
+    // The observation noise is the same everywhere; the model's own uncertainty must grow.
+    EXPECT_GE(out.model_std, (kl_weight > 5e-3 ? 2.0 : 1.5) * in.model_std);
+  }
 }
 
-// The model layer's posterior std is of the size of least squares' standard errors, and the
-// coefficients come out near the truth. Not yet within 3 posterior std: the dense path
-// absorbs part of the constant (theta_0 = 1.26 +- 0.02 against 1.0), so that is asserted as
-// a 0.3 bound here and stated as a missed goal in the README.
+// Data from the model alone: theta (identified by the orthogonality convention, see
+// BayesNet::theta_mean) within 3 posterior std of the truth, and that std of the size of
+// least squares' standard errors, not inflated. The model layer's own mean, before the dense
+// path's share in the regressor's span is counted to it, is off by 0.26 in the constant: the
+// identification is what this test guards.
 TEST(BaMbANN, RecoversTheModelCoefficients) {
   const double sigma = 0.1;
   const Sample train = draw(400, -2, 2, sigma, linear_model, 4), test = draw(400, -2, 2, sigma, linear_model, 5);
@@ -134,21 +143,20 @@ TEST(BaMbANN, RecoversTheModelCoefficients) {
   o.seed = 2;
   BayesNet net(o);
   net.fit(train.x, train.y, train.phi, Eigen::VectorXd::Zero(4));   // started from zeros, as the paper's Toy
-  const Eigen::VectorXd theta = net.theta_mean(), std = net.theta_std();
-  // Least squares' standard errors: the posterior should be of that size, not inflated.
+  const Eigen::VectorXd theta = net.theta_mean(), std = net.theta_std(), layer = net.model_layer_mean();
   const Eigen::MatrixXd cov = sigma * sigma * (train.phi.transpose() * train.phi).inverse();
   for (int j = 0; j < 4; ++j) {
-    std::printf("theta_%d = %.4f +- %.4f (true %.2f, least-squares s.e. %.4f)\n", j, theta[j], std[j], kTheta[j],
-                std::sqrt(cov(j, j)));
-    EXPECT_LE(std::abs(theta[j] - kTheta[j]), 0.3) << "coefficient " << j;
+    std::printf("theta_%d = %.4f +- %.4f (true %.2f, least-squares s.e. %.4f; model layer alone %.4f)\n", j, theta[j],
+                std[j], kTheta[j], std::sqrt(cov(j, j)), layer[j]);
+    EXPECT_LE(std::abs(theta[j] - kTheta[j]), 3 * std[j]) << "coefficient " << j;
     EXPECT_LE(std[j], 5 * std::sqrt(cov(j, j))) << "coefficient " << j;
   }
   EXPECT_LE(score(net, test).rmse, 1.15 * sigma);
 }
 
-// A residual the model cannot express (0.5 cos 5x): the dense path learns most of it. The
-// issue's goal, RMSE near the noise floor, is not reached in the default 3000 steps (0.205
-// against noise 0.1; model-only least squares 0.373).
+// A residual the model cannot express (0.5 cos 5x): the network learns it to near the noise
+// floor (0.127 for noise 0.1 in the default 3000 steps, 0.104-0.126 in 5000; the model-only
+// least squares leaves 0.373).
 TEST(BaMbANN, LearnsAHiddenSmoothResidual) {
   const double sigma = 0.1;
   const auto f = [](double x) { return linear_model(x) + 0.5 * std::cos(5 * x); };
@@ -159,13 +167,12 @@ TEST(BaMbANN, LearnsAHiddenSmoothResidual) {
   BayesNet net(o);
   net.fit(train.x, train.y, train.phi, Eigen::VectorXd::Zero(4));
   const double rmse = score(net, test).rmse;
-  // Least squares with the model alone leaves the residual in: the network must do better.
   const Eigen::VectorXd ls = train.phi.colPivHouseholderQr().solve(train.y.col(0));
   const double ls_rmse = std::sqrt((test.phi * ls - test.y.col(0)).squaredNorm() / test.x.rows());
   std::printf("BaMbANN with a hidden residual: test RMSE %.4f, model-only least squares %.4f, noise %.2f\n", rmse,
               ls_rmse, sigma);
-  EXPECT_GE(ls_rmse, 3 * sigma);       // the residual is there
-  EXPECT_LE(rmse, 0.7 * ls_rmse);      // and mostly learnt
+  EXPECT_GE(ls_rmse, 3 * sigma);    // the residual is there
+  EXPECT_LE(rmse, 1.3 * sigma);     // and learnt to near the noise floor
 }
 
 TEST(Bnn, SameSeedSameNumbersOtherSeedOtherNumbers) {

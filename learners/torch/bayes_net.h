@@ -31,7 +31,7 @@ struct BayesNetOptions {
   int threads = 1;                       // LibTorch intra-op threads during fit and predict
   std::uint64_t seed = 0;
   bool model_path = false;               // BaMbANN: add phi(x).theta with a Bayesian theta
-  double model_warmup = 0.3;             // BaMbANN: fraction of the epochs that fit the model path alone
+  double model_warmup = 0.0;             // BaMbANN: fraction of the epochs that fit the model path alone
 };
 
 // One fitted network. fit() and predict() take the ABI's layouts: X rows x inputs, Y rows x
@@ -50,8 +50,12 @@ class BayesNet {
   void predict(const Eigen::Ref<const RowMatrix>& X, const Eigen::Ref<const RowMatrix>& phi, double* mean,
                double* var) const;
 
-  Eigen::VectorXd theta_mean() const;   // posterior of the model path (empty without one)
+  // Posterior of theta (empty without a model path), identified by the orthogonality
+  // convention: the part of the dense path the model regressor can express on the training
+  // rows counts to theta (bayes_net.cc, identify_theta). Predictions are the same either way.
+  Eigen::VectorXd theta_mean() const;
   Eigen::VectorXd theta_std() const;
+  Eigen::VectorXd model_layer_mean() const;   // the model layer's own mean, before that
   Eigen::VectorXd noise_var() const;    // observation variance per output, target units^2
   double noise_floor_var(Eigen::Index output) const;   // noise_floor in target units^2
   int epochs_run() const;

@@ -102,7 +102,7 @@ constexpr spml_config_key kBambannKeys[] = {
     SPML_TORCH_COMMON_KEYS,
     {"model_prior_scale", SPML_VALUE_NUMBER, 1e-9, 1e9, "10",
      "theta's g-prior: N(prior, s^2) per whitened direction, s in target RMS"},
-    {"model_warmup", SPML_VALUE_NUMBER, 0, 1, "0.3", "fraction of the epochs that fit the model layer alone"},
+    {"model_warmup", SPML_VALUE_NUMBER, 0, 1, "0", "fraction of the epochs that fit the model layer alone"},
     {nullptr, 0, 0, 0, nullptr, nullptr}};
 
 const std::vector<spml_learner>& all() {
