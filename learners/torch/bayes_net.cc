@@ -195,7 +195,7 @@ struct BayesNet::Impl {
   // Identifies theta (BaMbANN): the dense path's function can also express anything in the
   // span of the model regressor (a constant, a linear trend), and with its tempered prior
   // nothing makes it leave that to theta -- on data from the model alone it took a quarter of
-  // the constant. Reported coefficients therefore follow the orthogonality convention of
+  // the constant after a model-only warm-up, and most of every coefficient without one. Reported coefficients therefore follow the orthogonality convention of
   // calibration with a discrepancy (Plumlee 2017): theta absorbs the least-squares projection
   // of the dense path onto the regressor's columns over the training rows, so that what the
   // network adds is orthogonal to the model there. Per posterior draw s: v_s + c_s with
@@ -371,9 +371,9 @@ void BayesNet::fit(const Eigen::Ref<const RowMatrix>& X, const Eigen::Ref<const 
 
   // model_warmup > 0: BaMbANN first fits the model path alone for that fraction of the
   // epochs. That keeps the dense path from taking model terms early and helps extrapolation
-  // (SimDyn-Ll test_extrap joint 0: 39.0 at 0.3, 47.8 at 0), but it leaves the dense path too
+  // (SimDyn-Ll test_extrap joint 0: 39.0 at 0.3, 49.3 at 0), but it leaves the dense path too
   // few steps at a high rate to learn the residual (Toy-Interp 0.50 vs 0.48, VIA-inst 3.71 vs
-  // 3.05, SimDyn-Ll test_interp joint 0 36.6 vs 13.5; README). The default is 0: the
+  // 3.05, SimDyn-Ll test_interp joint 0 36.6 vs 15.5; README). The default is 0: the
   // coefficients no longer need it, being identified after the fit (identify_theta).
   const int warmup_epochs = o.model_path ? static_cast<int>(std::floor(o.model_warmup * epochs)) : 0;
   // The step size decays along a half cosine to zero at the end: a constant step leaves Adam
