@@ -6,7 +6,8 @@ results.csv, its peak memory from the child's rusage). Peer: PyTorch (Debian's p
 running what learners/torch/bayes_net.cc runs with the defaults — 3 hidden ELU layers (64
 units for one output, 128 for more), local reparameterisation, KL weight 1e-3 on the dense
 weights, a model layer over 17 whitened columns, learned noise, Adam (eps 1e-7) at 1e-2 with
-cosine decay, 3000 steps of 64 rows, 1 thread. The peer's regressor is random with the arm's
+cosine decay, 3000 steps of 64 rows, 1 thread, then the two passes of 30 weight draws over the
+training rows that spml makes (noise recalibration, theta's identification). The peer's regressor is random with the arm's
 shape (rows x outputs x 17): the work per step is the same, the numbers are not compared.
 
     /usr/bin/python3 tools/bench/bnn_torch_peer.py --data out/simdyn-ll.h5 [--spml build/bin/spml]
@@ -52,7 +53,7 @@ def peer_fit(X, Y, params, steps, batch, lr, kl_weight, seed):
     opt = torch.optim.Adam([mu, rho, log_noise], lr=lr, eps=1e-7)
     per_epoch = -(-n // batch)
     epochs = max(1, -(-steps // per_epoch))
-    warm = int(0.3 * epochs)
+    warm = 0   # model_warmup's default
     step, n_steps = 0, epochs * per_epoch
     t0 = time.perf_counter()
     for e in range(epochs):
@@ -84,6 +85,29 @@ def peer_fit(X, Y, params, steps, batch, lr, kl_weight, seed):
                 g["lr"] = 0.5 * lr * (1 + math.cos(math.pi * step / n_steps))
             step += 1
             opt.step()
+
+    # After training spml makes two passes of 30 whole weight draws over the training rows:
+    # the noise recalibration (mean and variance of the prediction) and theta's identification
+    # (P^T dense per draw). The peer does the same work.
+    def dense_draws(rows, w):
+        h = rows.unsqueeze(0).expand(w.shape[0], -1, -1)
+        for i, (o, a, b) in enumerate(blocks):
+            h = torch.baddbmm(w[:, o + a * b:o + a * b + b].unsqueeze(1), h, w[:, o:o + a * b].view(-1, a, b))
+            if i + 1 < len(blocks):
+                h = F.elu(h)
+        return h
+
+    with torch.no_grad():
+        w = mu + F.softplus(rho) * torch.randn(30, total)
+        for s in range(0, n, 2048):
+            h = dense_draws(x[s:s + 2048], w) + torch.einsum("cop,sp->sco", phi[s:s + 2048], w[:, dense:])
+            h.mean(0), h.var(0)
+        ptd = torch.zeros(params, 30, dtype=torch.float64)
+        for s in range(0, n, 2048):
+            d = dense_draws(x[s:s + 2048], w).reshape(30, -1).double()
+            ptd += phi[s:s + 2048].reshape(-1, params).double().t() @ d.t()
+        P = phi.reshape(-1, params).double()
+        torch.linalg.lstsq(P.t() @ P, ptd)
     return time.perf_counter() - t0, epochs
 
 
