@@ -139,6 +139,9 @@ TEST(Compare, ScoreboardCountsTablesBeaten) {
   std::string report = compare_report({row("LLS", 1.40), row("GP", 0.70), row("LLS-simulated", 0.10)}, published);
   EXPECT_NE(report.find("toy test_interp 0             GP 0.70"), std::string::npos) << report;
   EXPECT_NE(report.find("1/2"), std::string::npos) << report;
+  // A long name keeps a gap to the next column.
+  report = compare_report({row("it-SVR-GP-SepKer", 123.45)}, published);
+  EXPECT_NE(report.find("it-SVR-GP-SepKer 123.45 "), std::string::npos) << report;
   EXPECT_NE(report.find("beats the paper's best in 0 of 16 tables (1 run"), std::string::npos) << report;
   report = compare_report({row("LLS", 1.40), row("GP", 0.45)}, published);
   EXPECT_NE(report.find("beats the paper's best in 1 of 16 tables (1 run"), std::string::npos) << report;
