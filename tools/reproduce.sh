@@ -3,7 +3,8 @@
 #   tools/reproduce.sh            quick: Toy (every learner incl. BNN rows, 5 repetitions) and SimDyn-Ll
 #                                 (8 learners, 1000 of the 5000 training rows); ~4 min on 2 cores
 #   tools/reproduce.sh --full     every scenario, every learner, 5 repetitions, all training rows
-#                                 (about 1.5 h on 2 cores; tools/grid.sh spreads it over more)
+#                                 (about 4 h of core time, SimDyn two thirds of it: ~2 h on 2 cores with
+#                                 tools/grid.sh --jobs 2, which also spreads it over more machines)
 # Results go to out/ (datasets) and out/bench/<scenario>/ (results.csv, predictions.h5);
 # an interrupted run continues where it stopped when started again.
 set -euo pipefail
