@@ -3,8 +3,9 @@
 #   tools/reproduce.sh            quick: Toy (every learner incl. BNN rows, 5 repetitions) and SimDyn-Ll
 #                                 (8 learners, 1000 of the 5000 training rows); ~4 min on 2 cores
 #   tools/reproduce.sh --full     every scenario, every learner, 5 repetitions, all training rows
-#                                 (about 4 h of core time, SimDyn two thirds of it: ~2 h on 2 cores with
-#                                 tools/grid.sh --jobs 2, which also spreads it over more machines)
+#                                 (the same units as tools/grid.sh --shards 4 --jobs 2, which ran them all
+#                                 in 47 min on 2 cores, one BLAS thread per job; here they run one after
+#                                 the other)
 # Results go to out/ (datasets) and out/bench/<scenario>/ (results.csv, predictions.h5);
 # an interrupted run continues where it stopped when started again.
 set -euo pipefail
