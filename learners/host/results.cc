@@ -16,13 +16,6 @@ constexpr const char* kColumns[] = {"scenario", "split",   "output",  "algo",   
                                     "rmsemin",  "rmsemax", "nllhmean", "nllhstd", "nllhmin",  "nllhmax",
                                     "fits",     "fitsec",  "warnings"};
 
-std::string fmt(double v) {
-  if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
-  std::ostringstream s;
-  s << std::setprecision(6) << v;
-  return s.str();
-}
-
 double number(const std::string& text, const std::string& where, bool allow_missing) {
   if (text == "inf") return std::numeric_limits<double>::infinity();
   if (allow_missing && (text == "-" || text.empty())) return std::numeric_limits<double>::quiet_NaN();
@@ -87,10 +80,10 @@ std::string results_line(const ResultRow& r) {
     if (c == ',') c = ';';
     else if (c == '\n' || c == '\r') c = ' ';
   std::ostringstream s;
-  s << r.scenario << "," << r.split << "," << r.output << "," << r.algo << "," << fmt(r.rmse_mean) << ","
-    << fmt(r.rmse_std) << "," << fmt(r.rmse_min) << "," << fmt(r.rmse_max) << "," << fmt(r.nllh_mean) << ","
-    << fmt(r.nllh_std) << "," << fmt(r.nllh_min) << "," << fmt(r.nllh_max) << "," << r.fits << ","
-    << fmt(r.fit_seconds) << "," << warnings;
+  s << r.scenario << "," << r.split << "," << r.output << "," << r.algo << "," << number_text(r.rmse_mean) << ","
+    << number_text(r.rmse_std) << "," << number_text(r.rmse_min) << "," << number_text(r.rmse_max) << "," << number_text(r.nllh_mean) << ","
+    << number_text(r.nllh_std) << "," << number_text(r.nllh_min) << "," << number_text(r.nllh_max) << "," << r.fits << ","
+    << number_text(r.fit_seconds) << "," << warnings;
   return s.str();
 }
 

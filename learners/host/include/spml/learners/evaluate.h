@@ -40,6 +40,10 @@ struct BenchOptions {
   // already present in out/units and left alone otherwise.
   int shard = 1, shards = 1;
   bool reuse_only = false;          // fit nothing: every unit must already be in out/units (merge)
+
+  // Throws LearnerError naming the option (as the command line spells it) when a value is out
+  // of range; run_bench() calls it, and so does `spml bench` before it loads anything.
+  void check() const;
 };
 
 struct BenchReport {
