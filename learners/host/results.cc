@@ -16,6 +16,19 @@ constexpr const char* kColumns[] = {"scenario", "split",   "output",  "algo",   
                                     "rmsemin",  "rmsemax", "nllhmean", "nllhstd", "nllhmin",  "nllhmax",
                                     "fits",     "fitsec",  "warnings"};
 
+// A text field of results.csv: one line (newlines become spaces), in double quotes when it
+// holds a comma or a quote (RFC 4180: a quote inside is doubled), so that a data file or split
+// called "a,b" stays one field for compare, plot and any CSV reader.
+std::string field(std::string text) {
+  for (char& c : text)
+    if (c == '\n' || c == '\r') c = ' ';
+  if (text.find_first_of(",\"") == std::string::npos && (text.empty() || (text.front() != ' ' && text.back() != ' ')))
+    return text;
+  std::string q = "\"";
+  for (char c : text) q += c == '"' ? std::string("\"\"") : std::string(1, c);
+  return q + "\"";
+}
+
 double number(const std::string& text, const std::string& where, bool allow_missing) {
   if (text == "inf") return std::numeric_limits<double>::infinity();
   if (allow_missing && (text == "-" || text.empty())) return std::numeric_limits<double>::quiet_NaN();
@@ -78,12 +91,11 @@ std::string results_line(const ResultRow& r) {
   std::string warnings = r.warnings;
   for (char& c : warnings)
     if (c == ',') c = ';';
-    else if (c == '\n' || c == '\r') c = ' ';
   std::ostringstream s;
-  s << r.scenario << "," << r.split << "," << r.output << "," << r.algo << "," << number_text(r.rmse_mean) << ","
+  s << field(r.scenario) << "," << field(r.split) << "," << r.output << "," << field(r.algo) << "," << number_text(r.rmse_mean) << ","
     << number_text(r.rmse_std) << "," << number_text(r.rmse_min) << "," << number_text(r.rmse_max) << "," << number_text(r.nllh_mean) << ","
     << number_text(r.nllh_std) << "," << number_text(r.nllh_min) << "," << number_text(r.nllh_max) << "," << r.fits << ","
-    << number_text(r.fit_seconds) << "," << warnings;
+    << number_text(r.fit_seconds) << "," << field(warnings);
   return s.str();
 }
 
