@@ -82,6 +82,9 @@ void generate_model(const ModelArgs& a, const std::string& out, std::uint64_t se
             << " joints, integration step " << run.sim_timestep << " s) in " << s << " s\n  RMS torque:";
   for (size_t j = 0; j < run.joints.size(); ++j) std::cout << " " << run.joints[j] << " " << run.rms[static_cast<Eigen::Index>(j)];
   std::cout << "\n  plugins: " << (run.plugins.empty() ? "none" : run.plugins) << "\n";
+  if (!csv && !a.derive)
+    std::cout << "  positions only: diagnose and identify need qd:/qdd: - write a .csv log for spml import --lowpass --derive, "
+                 "or add --derive (raw central differences)\n";
   if (csv) {
     std::string q, tau;
     for (const auto& j : run.joints) q += (q.empty() ? "" : ",") + ("q:" + j), tau += (tau.empty() ? "" : ",") + ("tau:" + j);
