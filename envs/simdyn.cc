@@ -7,6 +7,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "plugin_text.h"
 #include "signals.h"
 #include "spml/envs/mujoco_model.h"
 #include "spml/envs/planar_arm3.h"
@@ -128,17 +129,6 @@ std::string named_joint(const mjModel* m, int j, const std::string& file) {
     throw std::runtime_error(file + ": joint " + std::to_string(j) + " (" + kind +
                              ") has no name; the dataset's columns are named after the joints");
   return name;
-}
-
-std::string declarations_text(const ForceEffects& fx) {
-  std::ostringstream out;
-  for (const auto& inst : fx.instances()) {
-    out << inst.decl.instance << ": type=" << inst.decl.type << " joints=";
-    for (size_t i = 0; i < inst.decl.joints.size(); ++i) out << (i ? "," : "") << inst.decl.joints[i];
-    for (const auto& [k, v] : inst.decl.config) out << " " << k << "=" << v;
-    out << "; ";
-  }
-  return out.str();
 }
 
 }  // namespace
