@@ -18,6 +18,7 @@
 #include "spml/envs/mjcf_edit.h"
 #include "spml/envs/mjcf_regressor.h"
 #include "spml/matrix_file.h"
+#include <nlohmann/json.hpp>
 #include "test_util.h"
 
 using namespace spml;
@@ -394,4 +395,36 @@ TEST(ConsistentIdentification, PandaEveryBodyRealizableAndHeldOutAsGoodAsLeastSq
     std::cout << "    " << test.y_columns[static_cast<size_t>(j)] << ": " << 100 * shipped[j] << " / " << 100 * lsj[j] << " / " << 100 * cj[j] << "\n";
     EXPECT_LT(cj[j], shipped[j]) << test.y_columns[static_cast<size_t>(j)];
   }
+}
+
+// The command: `spml identify --write-model` runs the consistent estimator, prints the payload's
+// body as changed and writes a model MuJoCo loads; wrong combinations are refused.
+TEST(ConsistentIdentification, CommandWritesTheIdentifiedModelAndRefusesBadInput) {
+  const Payload p = payload_arm("consistent-cli");
+  const std::string data = (p.dir / "arm.h5").string(), out = (p.dir / "identified.xml").string();
+  write_dataset(data, arm_data(p, 0.0));
+  const std::string base = test::spml_bin() + " identify -m " + p.prior_path + " -d " + data;
+  auto r = test::run(base + " --write-model " + out);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("body b5  CHANGED"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("written: " + out), std::string::npos) << r.output;
+  const MjcfRegressor written(out);
+  EXPECT_NEAR(written.model()->body_mass[6], p.true_mass, 0.05 * p.true_mass);
+  r = test::run(base + " --estimator consistent --json");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const auto j = nlohmann::json::parse(r.output);
+  EXPECT_EQ(j["estimator"], "consistent");
+  EXPECT_EQ(j["bodies"].size(), 6u);
+  EXPECT_TRUE(j["bodies"][5]["changed"].get<bool>());
+  EXPECT_LT(j["errors"][1]["relative_error"].get<double>(), 1e-3);
+  // --write-model needs the consistent estimator; an unwritable path fails cleanly.
+  r = test::run(base + " --estimator ls --write-model " + out);
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("--write-model"), std::string::npos) << r.output;
+  r = test::run(base + " --write-model " + (p.dir / "no-such-folder" / "x.xml").string());
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("spml: error:"), std::string::npos) << r.output;
+  EXPECT_FALSE(std::filesystem::exists(p.dir / "no-such-folder"));
+  r = test::run(base + " --estimator consistent --prior-weight 0");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
 }

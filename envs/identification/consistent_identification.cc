@@ -143,7 +143,7 @@ void minimise(const ConsistentObjective& obj, double sigma, const ConsistentOpti
     Round r{&obj, best.theta, whitening(obj.hessian(best.theta, sigma), is_bounded), &best, f_prev};
     std::vector<double> lower(static_cast<size_t>(n), -HUGE_VAL);
     for (Eigen::Index k = 0; k < n; ++k)
-      if (is_bounded[static_cast<size_t>(k)]) lower[static_cast<size_t>(k)] = -r.theta_c[k] / r.T(k, k);
+      if (is_bounded[static_cast<size_t>(k)]) lower[static_cast<size_t>(k)] = std::min(0.0, -r.theta_c[k] / r.T(k, k));
     nlopt::opt opt(nlopt::LD_LBFGS, static_cast<unsigned>(n));
     opt.set_min_objective(round_objective, &r);
     opt.set_lower_bounds(lower);
@@ -164,6 +164,8 @@ void minimise(const ConsistentObjective& obj, double sigma, const ConsistentOpti
       // round starts again from the best point, whitened there.
       best.stop = std::string("FAILURE: ") + e.what();
     }
+    for (Eigen::Index k = 0; k < n; ++k)   // theta_B = theta_cB + D v >= 0 up to rounding
+      if (is_bounded[static_cast<size_t>(k)]) best.theta[k] = std::max(best.theta[k], 0.0);
     const bool converged = r.fbest >= f_prev - 1e-12 * std::fabs(f_prev);
     f_prev = std::min(f_prev, r.fbest);
     if (converged) best.stop = "CONVERGED";   // a whole round gained less than 1e-12 of the objective

@@ -55,11 +55,15 @@ void print(const ConsistentArgs& a, const ConsistentIdentification& id, const st
   std::cout << "identified on '" << a.split << "' of " << a.data << ": physically consistent (log-Cholesky bodies, joint terms >= 0, "
             << "prior weight " << id.prior_weight << "), residual std " << id.sigma << ", " << id.evaluations << " evaluations, "
             << id.seconds << " s (" << id.stop << ")\n";
+  if (id.stop != "CONVERGED")
+    std::cout << "warning: the optimiser stopped before converging (" << id.stop << "): the estimates may still move\n";
   for (const auto& b : id.bodies) {
-    std::cout << "  body " << b.name << (b.fitted ? (b.changed ? "  CHANGED (max |change|/SE " : "  (max |change|/SE ") : "  kept: ")
-              << (b.fitted ? "" : b.note) << std::setprecision(3) << (b.fitted ? b.max_z : 0.0) << (b.fitted ? ")\n" : "\n")
-              << std::setprecision(6);
-    if (!b.fitted) continue;
+    if (!b.fitted) {
+      std::cout << "  body " << b.name << "  " << b.note << "\n";
+      continue;
+    }
+    std::cout << "  body " << b.name << (b.changed ? "  CHANGED" : "") << "  (largest |change| / SE " << std::setprecision(3) << b.max_z
+              << ")\n" << std::setprecision(6);
     std::cout << "      mass " << b.prior.mass << " -> " << b.identified.mass << " +- " << b.std_error[0] << " kg\n"
               << "      com  " << triple(b.prior.com) << " -> " << triple(b.identified.com) << " +- " << triple(b.std_error.segment<3>(1)) << " m\n"
               << "      principal moments " << triple(b.prior.principal) << " -> " << triple(b.identified.principal) << " kg m^2\n";
