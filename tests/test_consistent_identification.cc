@@ -427,4 +427,16 @@ TEST(ConsistentIdentification, CommandWritesTheIdentifiedModelAndRefusesBadInput
   EXPECT_FALSE(std::filesystem::exists(p.dir / "no-such-folder"));
   r = test::run(base + " --estimator consistent --prior-weight 0");
   EXPECT_EQ(r.exit_code, 2) << r.output;
+  r = test::run(base + " --prior-weight 10");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("--estimator consistent only"), std::string::npos) << r.output;
+  // The library refuses a regressor that does not match the model, naming the sizes.
+  const MjcfRegressor reg(p.prior_path);
+  try {
+    fit_consistent(reg, Eigen::MatrixXd::Ones(10, 3), Eigen::VectorXd::Ones(10));
+    ADD_FAILURE() << "no error";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("3 columns and 10 rows for " + std::to_string(reg.param_names().size()) + " parameters"),
+              std::string::npos) << e.what();
+  }
 }

@@ -71,10 +71,13 @@ void add_identify(CLI::App& app) {
   cmd->add_option("--prior-weight", a->prior_weight, "consistent: weight of the prior toward the MJCF (default 1)")
       ->check(CLI::PositiveNumber);
   cmd->add_option("--write-model", a->write_model, "consistent: write the MJCF with the identified inertials and joint terms here");
-  cmd->callback([a] {
+  cmd->callback([a, cmd] {
     if (a->estimator == "ls" && !a->write_model.empty())
       throw CLI::ValidationError("--write-model", "needs --estimator consistent: base parameters do not define every body");
-    if (a->estimator == "consistent" || (a->estimator.empty() && !a->write_model.empty()))
+    const bool consistent = a->estimator == "consistent" || (a->estimator.empty() && !a->write_model.empty());
+    if (!consistent && cmd->count("--prior-weight"))
+      throw CLI::ValidationError("--prior-weight", "applies to --estimator consistent only");
+    if (consistent)
       return identify_consistent_command({a->model, a->data, a->split, a->write_model, a->json, a->offsets, a->prior_weight});
     MjcfRegressor reg(a->model, RegressorOptions{a->offsets});
     auto base = reg.base_parameters();
