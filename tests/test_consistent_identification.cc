@@ -138,12 +138,7 @@ TEST(BodyInertial, ReadsBackWhatMujocoCompiled) {
   // The delta-method Jacobian: central differences.
   const Vector10d p = reg.model_params().head<10>();
   const Matrix10d D = body_inertial_jacobian(p);
-  auto q = [](const Vector10d& x) {
-    const BodyInertial bi = body_inertial(x);
-    Vector10d v;
-    v << bi.mass, bi.com, Eigen::Map<const Eigen::Matrix<double, 6, 1>>(bi.fullinertia().data());
-    return v;
-  };
+  auto q = [](const Vector10d& x) { return mjcf_quantities(body_inertial(x)); };
   for (int k = 0; k < 10; ++k) {
     Vector10d a = p, c = p;
     a[k] += 1e-7;
@@ -376,9 +371,13 @@ TEST(ConsistentIdentification, PandaEveryBodyRealizableAndHeldOutAsGoodAsLeastSq
   const ConsistentIdentification id = identify_consistent(reg, ds, "train");
   print_bodies(id);
   for (const auto& b : id.bodies)
-    if (b.fitted) EXPECT_TRUE(realizable(id.pi.segment<10>(10 * (b.body_id - 1)))) << b.name;
+    if (b.fitted) {
+      EXPECT_TRUE(realizable(id.pi.segment<10>(10 * (b.body_id - 1)))) << b.name;
+    }
   for (const auto& t : id.terms)
-    if (t.name.rfind("armature:", 0) == 0 || t.name.rfind("damping:", 0) == 0 || t.name.rfind("coulomb:", 0) == 0) EXPECT_GE(t.value, 0) << t.name;
+    if (t.name.rfind("armature:", 0) == 0 || t.name.rfind("damping:", 0) == 0 || t.name.rfind("coulomb:", 0) == 0) {
+      EXPECT_GE(t.value, 0) << t.name;
+    }
   const double ls_test = ls.errors[1].relative_error, c_test = id.errors[1].relative_error;
   std::cout << "  held out: least squares " << 100 * ls_test << " %, consistent " << 100 * c_test << " %\n";
   EXPECT_LT(c_test, 1.1 * ls_test);

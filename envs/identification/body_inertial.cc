@@ -17,6 +17,13 @@ std::array<double, 6> BodyInertial::fullinertia() const {
   return f;
 }
 
+Vector10d mjcf_quantities(const BodyInertial& b) {
+  const std::array<double, 6> full = b.fullinertia();
+  Vector10d q;
+  q << b.mass, b.com, full[0], full[1], full[2], full[3], full[4], full[5];
+  return q;
+}
+
 BodyInertial body_inertial(const Vector10d& pi) {
   if (!(pi[0] > 0)) throw std::domain_error("a body with mass <= 0 has no centre of mass");
   BodyInertial b;

@@ -193,13 +193,7 @@ void describe(const MjcfRegressor& reg, const std::vector<std::string>& body_not
     body.identified = body.fitted ? body_inertial(p) : body.prior;
     if (body.fitted) {
       body.std_error = body_inertial_std_errors(p, out.covariance.block<10, 10>(10 * b, 10 * b));
-      // The ten quantities in the order of std_error.
-      auto quantities = [](const BodyInertial& bi) {
-        Vector10d q;
-        q << bi.mass, bi.com, Eigen::Map<const Eigen::Matrix<double, 6, 1>>(bi.fullinertia().data());
-        return q;
-      };
-      const Vector10d diff = quantities(body.identified) - quantities(body.prior);
+      const Vector10d diff = mjcf_quantities(body.identified) - mjcf_quantities(body.prior);
       for (int k = 0; k < 10; ++k)
         if (body.std_error[k] > 0) body.max_z = std::max(body.max_z, std::fabs(diff[k]) / body.std_error[k]);
       body.changed = body.max_z > o.change_z;

@@ -25,7 +25,10 @@ struct BodyInertial {
 // pi in MjcfRegressor's order (m, m c, inertia about the body origin); requires m > 0.
 BodyInertial body_inertial(const Vector10d& pi);
 
-// Standard errors of (mass, com xyz, fullinertia xx yy zz xy xz yz) from the covariance of pi.
+// (mass, com xyz, fullinertia xx yy zz xy xz yz): the ten quantities an MJCF <inertial> states.
+Vector10d mjcf_quantities(const BodyInertial& b);
+
+// Standard errors of those ten quantities from the covariance of pi.
 Vector10d body_inertial_std_errors(const Vector10d& pi, const Matrix10d& covariance);
 
 // d (mass, com, fullinertia) / d pi at pi.
