@@ -293,7 +293,8 @@ TEST(ConsistentIdentification, RecoversAPayloadFromExactTorques) {
   const Split& test = ds.get("test");
   const RowMatrix tau = model_torques(out, test);
   const double rel = (tau - test.Y).norm() / test.Y.norm();
-  std::cout << "  written model, held out: relative error " << rel << "\n";
+  std::cout << "  written model, held out: relative error " << rel << "; last body mass " << last.identified.mass << " (true "
+            << p.true_mass << "), com " << last.identified.com.transpose() << " (true " << p.true_com.transpose() << ")\n";
   EXPECT_LT(rel, 1e-3);
   // MuJoCo compiles the written file to the identified parameters (its compiler diagonalises
   // fullinertia by Jacobi sweeps, good to about 1e-9 of the largest entry).
