@@ -5,6 +5,7 @@
 #include <nlohmann/json.hpp>
 
 #include "commands.h"
+#include "identify_consistent.h"
 #include "spml/envs/mjcf_regressor.h"
 
 namespace spml::cli {
@@ -57,13 +58,27 @@ void add_regressor(CLI::App& app) {
 }
 
 void add_identify(CLI::App& app) {
-  auto* cmd = app.add_subcommand("identify", "Least-squares identification of an MJCF model's base parameters on a dataset");
-  struct Args : ModelArgs { std::string data, split = "train"; };
+  auto* cmd = app.add_subcommand("identify", "Identification of an MJCF model on a dataset: base parameters by least squares, "
+                                              "or every body and joint term physically consistent");
+  struct Args : ModelArgs { std::string data, split = "train", estimator, write_model; double prior_weight = 1.0; };
   auto a = std::make_shared<Args>();
   add_model_options(cmd, *a, "MJCF file");
   cmd->add_option("--data,-d", a->data, "spml/1 dataset with q:/qd:/qdd:<joint> inputs and tau:<joint> targets")->required();
   cmd->add_option("--split", a->split, "split to identify on; every other split is scored as held out");
-  cmd->callback([a] {
+  cmd->add_option("--estimator", a->estimator, "ls: base parameters by least squares (default); consistent: every body's "
+                  "inertial realizable, joint terms >= 0, prior toward the MJCF (default with --write-model)")
+      ->check(CLI::IsMember({"ls", "consistent"}));
+  cmd->add_option("--prior-weight", a->prior_weight, "consistent: weight of the prior toward the MJCF (default 1)")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--write-model", a->write_model, "consistent: write the MJCF with the identified inertials and joint terms here");
+  cmd->callback([a, cmd] {
+    if (a->estimator == "ls" && !a->write_model.empty())
+      throw CLI::ValidationError("--write-model", "needs --estimator consistent: base parameters do not define every body");
+    const bool consistent = a->estimator == "consistent" || (a->estimator.empty() && !a->write_model.empty());
+    if (!consistent && cmd->count("--prior-weight"))
+      throw CLI::ValidationError("--prior-weight", "applies to --estimator consistent only");
+    if (consistent)
+      return identify_consistent_command({a->model, a->data, a->split, a->write_model, a->json, a->offsets, a->prior_weight});
     MjcfRegressor reg(a->model, RegressorOptions{a->offsets});
     auto base = reg.base_parameters();
     Dataset ds = read_dataset(a->data);

@@ -1,0 +1,37 @@
+// Editing an MJCF file in place as XML (tinyxml2), so that its defaults, classes, names and
+// comments survive: new joint attributes, new body inertials, force-plugin declarations.
+// Used by `spml identify --write-model`; meant for `spml diagnose`'s extended.xml as well.
+#pragma once
+
+#include <array>
+#include <map>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Core>
+
+namespace spml {
+
+struct MjcfEdits {
+  // joint name -> MJCF attribute (armature, damping, frictionloss, stiffness) -> value
+  std::map<std::string, std::map<std::string, double>> joint_attributes;
+  struct Inertial {
+    std::string body;
+    double mass = 0;
+    Eigen::Vector3d pos = Eigen::Vector3d::Zero();   // centre of mass, body frame
+    std::array<double, 6> fullinertia{};             // Ixx Iyy Izz Ixy Ixz Iyz about the centre of mass
+  };
+  std::vector<Inertial> inertials;                   // each replaces the body's <inertial>
+  std::vector<std::pair<std::string, std::string>> texts;   // <custom><text name data>
+  std::string comment;                               // put at the top of the file
+};
+
+// The text of the edited model. Relative asset and include paths are made absolute so the file
+// loads from any folder. What cannot be applied (a joint or body defined in an included file, an
+// unnamed body) is appended to `notes`. Throws std::runtime_error naming the file when it is not
+// an MJCF or when its compiler settings would override written inertials (inertiafromgeom="true",
+// settotalmass).
+std::string edit_mjcf(const std::string& model_path, const MjcfEdits& edits, std::vector<std::string>& notes);
+
+}  // namespace spml

@@ -1,0 +1,122 @@
+#include "spml/envs/mjcf_edit.h"
+
+#include <tinyxml2.h>
+
+#include <filesystem>
+#include <functional>
+#include <stdexcept>
+
+#include "spml/parse.h"
+
+namespace spml {
+namespace {
+
+namespace fs = std::filesystem;
+using tinyxml2::XMLElement;
+
+void visit(XMLElement* root, const std::function<void(XMLElement*)>& f) {
+  for (XMLElement* e = root->FirstChildElement(); e; e = e->NextSiblingElement()) {
+    f(e);
+    visit(e, f);
+  }
+}
+
+XMLElement* named(XMLElement* root, const std::string& tag, const std::string& name) {
+  XMLElement* hit = nullptr;
+  visit(root, [&](XMLElement* e) {
+    const char* n = e->Attribute("name");
+    if (!hit && tag == e->Name() && n && name == n) hit = e;
+  });
+  return hit;
+}
+
+std::string joined(const double* v, int n) {
+  std::string s;
+  for (int k = 0; k < n; ++k) s += (k ? " " : "") + exact_text(v[k]);
+  return s;
+}
+
+// Asset folders, asset files and includes resolve against the model's folder: made absolute.
+void absolute_paths(XMLElement* root, const fs::path& dir) {
+  auto absolute = [&](const char* p) { return fs::path(p).is_absolute() ? std::string(p) : (dir / p).lexically_normal().string(); };
+  bool meshdir = false, texturedir = false;
+  visit(root, [&](XMLElement* e) {
+    if (std::string(e->Name()) != "compiler") return;
+    for (const char* attr : {"meshdir", "texturedir", "assetdir"})
+      if (const char* v = e->Attribute(attr)) {
+        e->SetAttribute(attr, absolute(v).c_str());
+        meshdir |= std::string(attr) != "texturedir";
+        texturedir |= std::string(attr) != "meshdir";
+      }
+  });
+  visit(root, [&](XMLElement* e) {
+    const char* file = e->Attribute("file");
+    if (!file) return;
+    const std::string tag = e->Name();
+    const bool in_dir = (tag == "mesh" || tag == "skin" || tag == "hfield") ? meshdir : tag == "texture" && texturedir;
+    if (!in_dir) e->SetAttribute("file", absolute(file).c_str());
+  });
+}
+
+void check_compiler(XMLElement* root, const std::string& path) {
+  visit(root, [&](XMLElement* e) {
+    if (std::string(e->Name()) != "compiler") return;
+    const char* fromgeom = e->Attribute("inertiafromgeom");
+    if (fromgeom && std::string(fromgeom) == "true")
+      throw std::runtime_error(path + ": <compiler inertiafromgeom=\"true\"> would replace the written inertials by the geoms'");
+    if (e->DoubleAttribute("settotalmass", -1) > 0)
+      throw std::runtime_error(path + ": <compiler settotalmass> would rescale the written masses");
+  });
+}
+
+void set_inertial(tinyxml2::XMLDocument& doc, XMLElement* body, const MjcfEdits::Inertial& in) {
+  while (XMLElement* old = body->FirstChildElement("inertial")) body->DeleteChild(old);
+  XMLElement* e = doc.NewElement("inertial");
+  e->SetAttribute("pos", joined(in.pos.data(), 3).c_str());
+  e->SetAttribute("mass", exact_text(in.mass).c_str());
+  e->SetAttribute("fullinertia", joined(in.fullinertia.data(), 6).c_str());
+  body->InsertFirstChild(e);
+}
+
+}  // namespace
+
+std::string edit_mjcf(const std::string& model_path, const MjcfEdits& edits, std::vector<std::string>& notes) {
+  tinyxml2::XMLDocument doc;
+  if (doc.LoadFile(model_path.c_str()) != tinyxml2::XML_SUCCESS)
+    throw std::runtime_error(model_path + ": cannot read it as XML: " + std::string(doc.ErrorStr()));
+  XMLElement* root = doc.RootElement();
+  if (!root || std::string(root->Name()) != "mujoco") throw std::runtime_error(model_path + ": the root element is not <mujoco>");
+  if (!edits.inertials.empty()) check_compiler(root, model_path);
+  absolute_paths(root, fs::absolute(fs::path(model_path)).parent_path());
+  for (const auto& [joint, attrs] : edits.joint_attributes) {
+    XMLElement* e = named(root, "joint", joint);
+    if (!e) {
+      notes.push_back("joint '" + joint + "' is not defined in " + model_path + " itself (an included file?): its values are not written");
+      continue;
+    }
+    for (const auto& [attr, value] : attrs) e->SetAttribute(attr.c_str(), exact_text(value).c_str());
+  }
+  for (const auto& in : edits.inertials) {
+    XMLElement* body = named(root, "body", in.body);
+    if (body)
+      set_inertial(doc, body, in);
+    else
+      notes.push_back("body '" + in.body + "' is not defined in " + model_path + " itself (unnamed or included?): its inertial is not written");
+  }
+  if (!edits.texts.empty()) {
+    XMLElement* custom = root->FirstChildElement("custom");
+    if (!custom) custom = root->InsertEndChild(doc.NewElement("custom"))->ToElement();
+    for (const auto& [name, data] : edits.texts) {
+      XMLElement* text = doc.NewElement("text");
+      text->SetAttribute("name", name.c_str());
+      text->SetAttribute("data", data.c_str());
+      custom->InsertEndChild(text);
+    }
+  }
+  if (!edits.comment.empty()) doc.InsertFirstChild(doc.NewComment((" " + edits.comment + " ").c_str()));
+  tinyxml2::XMLPrinter printer;
+  doc.Print(&printer);
+  return printer.CStr();
+}
+
+}  // namespace spml
