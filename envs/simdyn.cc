@@ -5,6 +5,7 @@
 #include <random>
 #include <sstream>
 
+#include "plugin_text.h"
 #include "signals.h"
 #include "spml/envs/mujoco_model.h"
 #include "spml/envs/planar_arm3.h"
@@ -110,17 +111,6 @@ Split make_split(const std::string& name, const Rollout& r, Eigen::Index begin, 
     s.t[i] = r.t[k];
   }
   return s;
-}
-
-std::string declarations_text(const ForceEffects& fx) {
-  std::ostringstream out;
-  for (const auto& inst : fx.instances()) {
-    out << inst.decl.instance << ": type=" << inst.decl.type << " joints=";
-    for (size_t i = 0; i < inst.decl.joints.size(); ++i) out << (i ? "," : "") << inst.decl.joints[i];
-    for (const auto& [k, v] : inst.decl.config) out << " " << k << "=" << v;
-    out << "; ";
-  }
-  return out.str();
 }
 
 }  // namespace

@@ -24,12 +24,10 @@
 namespace spml {
 namespace {
 
-std::string num(double v) {
-  std::ostringstream s;
-  s.precision(12);
-  s << v;
-  return s.str();
-}
+using test::num;
+using test::random_chain;
+using test::with_declarations;
+using test::effect_text;
 
 struct Draw {
   std::string label;          // model name
@@ -41,48 +39,11 @@ struct Draw {
   std::map<std::string, double> truth;   // linear parameters to check: "effect@joint.param"
 };
 
-// A chain of n hinge bodies with random geometry, masses, axes and gravity direction.
-std::string random_chain(std::mt19937_64& rng, int n, double payload) {
-  std::uniform_real_distribution<double> u(-1, 1), pos(0.2, 0.5), mass(0.5, 3.0), inertia(0.005, 0.05);
-  Eigen::Vector3d g(u(rng), u(rng), u(rng));
-  g = 9.81 * g.normalized();
-  std::ostringstream x;
-  x << "<mujoco model=\"chain\">\n  <option gravity=\"" << g.x() << " " << g.y() << " " << g.z() << "\"/>\n  <worldbody>\n";
-  for (int j = 0; j < n; ++j) {
-    Eigen::Vector3d axis(u(rng), u(rng), u(rng));
-    axis.normalize();
-    double m = mass(rng);
-    if (j == n - 1) m += payload;
-    x << std::string(4 + 2 * j, ' ') << "<body name=\"b" << j << "\" pos=\"" << (j ? pos(rng) : 0.0) << " 0 0\">\n"
-      << std::string(6 + 2 * j, ' ') << "<joint name=\"j" << j << "\" type=\"hinge\" axis=\"" << axis.x() << " " << axis.y() << " "
-      << axis.z() << "\" armature=\"" << 0.05 << "\" damping=\"" << 0.5 << "\"/>\n"
-      << std::string(6 + 2 * j, ' ') << "<inertial pos=\"" << 0.5 * pos(rng) << " " << 0.05 * u(rng) << " 0\" mass=\"" << m
-      << "\" diaginertia=\"" << [&] {
-           // Three moments within 30 % of each other always satisfy the triangle inequality.
-           const double i0 = inertia(rng);
-           std::uniform_real_distribution<double> f(0.7, 1.0);
-           return num(i0 * f(rng)) + " " + num(i0 * f(rng)) + " " + num(i0 * f(rng));
-         }() << "\"/>\n";
-  }
-  for (int j = n - 1; j >= 0; --j) x << std::string(4 + 2 * j, ' ') << "</body>\n";
-  x << "  </worldbody>\n</mujoco>\n";
-  return x.str();
-}
-
 std::string read_file(const std::string& path) {
   std::ifstream in(path);
   std::stringstream s;
   s << in.rdbuf();
   return s.str();
-}
-
-std::string with_declarations(std::string xml, const std::vector<std::string>& texts) {
-  if (texts.empty()) return xml;
-  std::string custom = "  <custom>\n";
-  for (size_t i = 0; i < texts.size(); ++i) custom += "    <text name=\"spml.plugin.hidden" + std::to_string(i) + "\" data=\"" + texts[i] + "\"/>\n";
-  custom += "  </custom>\n";
-  const auto end = xml.rfind("</mujoco>");
-  return xml.insert(end, custom);
 }
 
 // Writes a dataset measured from the true model: a multi-sine per joint, torques with noise.
@@ -158,39 +119,6 @@ std::vector<double> torque_scale(const std::string& path, int J) {
   return s;
 }
 
-// One hidden effect on joint j (index into d.joints), its size a multiple k of the noise.
-std::string effect_text(const std::string& effect, const std::string& joint, double sigma, std::mt19937_64& rng, Draw& d) {
-  std::uniform_real_distribution<double> k(8, 14), u(0, 1);
-  const double a = k(rng) * sigma;
-  const std::string key = effect + "@" + joint;
-  if (effect == "coulomb") {
-    d.truth[key + ".fc"] = a;
-    return "type=coulomb joints=" + joint + " fc=" + num(a);
-  }
-  if (effect == "offset") {
-    const double c = u(rng) < 0.5 ? -a : a;
-    d.truth[key + ".c"] = c;
-    return "type=offset joints=" + joint + " c=" + num(c);
-  }
-  if (effect == "stribeck") return "type=stribeck joints=" + joint + " fc=" + num(0.5 * a) + " fs=" + num(1.5 * a) + " vs=" + num(0.1 + 0.2 * u(rng));
-  if (effect == "friction_band") {
-    // The trajectory spans about +-1 rad; a band of width 0.5-0.8 rad inside it.
-    const double lo = -0.6 + 0.5 * u(rng), w = 0.5 + 0.3 * u(rng);
-    return "type=friction_band joints=" + joint + " lower=" + num(lo) + " upper=" + num(lo + w) + " level=" + num(a);
-  }
-  if (effect == "ripple") {
-    const int gear = 3 + static_cast<int>(u(rng) * 30);
-    return "type=ripple joints=" + joint + " gear=" + std::to_string(gear) + " harmonics=1 amplitudes=" + num(a) + " phases=" + num(6 * u(rng));
-  }
-  if (effect == "asymmetric_friction") {
-    // Direction-dependent viscous friction on top of Coulomb (asymmetric Coulomb alone is
-    // Coulomb plus an offset: the data cannot tell them apart).
-    const double fv = a / 0.8;
-    return "type=asymmetric_friction joints=" + joint + " fc_pos=" + num(a) + " fc_neg=" + num(a) + " fv_pos=" + num(fv) + " fv_neg=" + num(0.2 * fv);
-  }
-  throw std::logic_error("unknown effect " + effect);
-}
-
 Draw make_draw(int index, std::mt19937_64& rng, const std::filesystem::path& dir, std::vector<double>& sigma) {
   static const std::vector<std::string> vocabulary = {"coulomb", "offset", "stribeck", "friction_band", "ripple", "asymmetric_friction"};
   Draw d;
@@ -233,13 +161,13 @@ Draw make_draw(int index, std::mt19937_64& rng, const std::filesystem::path& dir
     const size_t a = pick_joint(rng), b = (a + 1) % d.joints.size();
     std::uniform_int_distribution<size_t> pick_effect(0, 1);
     const std::string e1 = pick_effect(rng) ? "coulomb" : "offset", e2 = pick_effect(rng) ? "ripple" : "friction_band";
-    texts.push_back(effect_text(e1, d.joints[a], sigma[a], rng, d));
-    texts.push_back(effect_text(e2, d.joints[b], sigma[b], rng, d));
+    texts.push_back(effect_text(e1, d.joints[a], sigma[a], rng, d.truth));
+    texts.push_back(effect_text(e2, d.joints[b], sigma[b], rng, d.truth));
     d.expected = {e1 + "@" + d.joints[a], e2 + "@" + d.joints[b]};
     d.hidden = e1 + "+" + e2;
   } else if (scenario != "nothing") {
     const size_t j = pick_joint(rng);
-    texts.push_back(effect_text(scenario, d.joints[j], sigma[j], rng, d));
+    texts.push_back(effect_text(scenario, d.joints[j], sigma[j], rng, d.truth));
     d.expected = {scenario + "@" + d.joints[j]};
   }
   if (d.true_xml.empty()) d.true_xml = with_declarations(d.user_xml, texts);

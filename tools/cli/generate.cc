@@ -1,16 +1,97 @@
-// spml generate: regenerate the paper's scenarios into spml/1 files.
+// spml generate: regenerate the paper's scenarios into spml/1 files, or measure a run of any
+// MJCF robot (--model) the way a real logger would.
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <iostream>
 
 #include "commands.h"
+#include "spml/envs/measured_run.h"
 #include "spml/envs/scenarios.h"
 #include "spml/parse.h"
 
 namespace spml::cli {
+namespace {
+
+// The --model options as typed; parsed into MeasurementOptions with messages naming the option.
+struct ModelArgs {
+  std::string model, excitation = "multisine", amplitude = "0.8", duration = "20", rate = "1000", controller = "pd",
+              bandwidth = "4", torque_noise = "0.01", encoder_bits = "18", jitter = "0";
+  std::vector<std::string> plugin_paths;
+  bool derive = false;
+};
+
+double number_option(const std::string& option, const std::string& text, double lo, double hi) {
+  const auto v = parse_number(text);
+  if (!v || !(*v >= lo && *v <= hi))
+    throw CLI::ValidationError(option, "'" + text + "' is not a number in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]");
+  return *v;
+}
+
+void add_model_options(CLI::App* cmd, ModelArgs& m) {
+  cmd->add_option("--model,-m", m.model, "any MJCF (hinge/slide joints): measure a run of it instead of a scenario");
+  cmd->add_option("--plugin-path", m.plugin_paths, "extra force-plugin library or folder (also $SPML_PLUGIN_PATH)");
+  cmd->add_option("--excitation", m.excitation, "multisine | chirp | file:PATH (CSV with t and q:<joint>)")->capture_default_str();
+  cmd->add_option("--amplitude", m.amplitude, "peak reference excursion [rad] (slide joints: 1/8 of it in m)")->capture_default_str();
+  cmd->add_option("--duration", m.duration, "logged seconds (file excitation: the file's span unless given)")->capture_default_str();
+  cmd->add_option("--rate", m.rate, "controller and logger rate [Hz]")->capture_default_str();
+  cmd->add_option("--controller", m.controller, "pd (PD + bias-force compensation) | torque (open loop)")->capture_default_str();
+  cmd->add_option("--bandwidth", m.bandwidth, "PD closed-loop bandwidth [Hz]")->capture_default_str();
+  cmd->add_option("--torque-noise", m.torque_noise, "torque noise std as a fraction of each joint's RMS torque")->capture_default_str();
+  cmd->add_option("--encoder-bits", m.encoder_bits, "encoder counts per turn 2^N (slide: per metre); 0: exact positions")->capture_default_str();
+  cmd->add_option("--jitter", m.jitter, "std of the sampling instants [s] (clipped to 0.45 / rate)")->capture_default_str();
+  cmd->add_flag("--derive", m.derive, "spml/1 output: add qd:/qdd: by raw central differences (default: positions only)");
+}
+
+MeasurementOptions measurement_options(const ModelArgs& a, std::uint64_t seed) {
+  MeasurementOptions o;
+  o.excitation.kind = a.excitation;
+  o.excitation.amplitude = number_option("--amplitude", a.amplitude, 1e-6, 1e3);
+  o.excitation.seed = seed;
+  const bool from_file = a.excitation.rfind("file:", 0) == 0;
+  o.duration = from_file && a.duration == "20" ? reference_file_duration(a.excitation.substr(5))
+                                               : number_option("--duration", a.duration, 1e-3, 1e6);
+  o.rate = number_option("--rate", a.rate, 1, 1e6);
+  o.controller = a.controller;
+  o.bandwidth = number_option("--bandwidth", a.bandwidth, 1e-3, 1e5);
+  o.torque_noise = number_option("--torque-noise", a.torque_noise, 0, 10);
+  const auto bits = parse_integer(a.encoder_bits, 0, 40);
+  if (!bits) throw CLI::ValidationError("--encoder-bits", "'" + a.encoder_bits + "' is not a whole number in [0, 40]");
+  o.encoder_bits = static_cast<int>(*bits);
+  o.jitter = number_option("--jitter", a.jitter, 0, 1);
+  o.seed = seed;
+  return o;
+}
+
+void generate_model(const ModelArgs& a, const std::string& out, std::uint64_t seed) {
+  if (out.empty()) throw std::invalid_argument("--model needs --out FILE (.csv: a text log for spml import; else spml/1)");
+  add_plugin_paths(a.plugin_paths);
+  const MeasurementOptions o = measurement_options(a, seed);
+  const bool csv = std::filesystem::path(out).extension() == ".csv";
+  if (csv && a.derive) throw CLI::ValidationError("--derive", "a .csv log holds positions only; derive with spml import --derive");
+  const auto start = std::chrono::steady_clock::now();
+  const MeasuredRun run = simulate_measured(a.model, o);
+  if (csv)
+    write_measured_csv(out, run);
+  else
+    write_dataset(out, measured_dataset(run, a.derive, a.model));
+  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  std::cout << a.model << " -> " << out << " (" << run.t.size() << " samples at " << o.rate << " Hz, " << run.joints.size()
+            << " joints, integration step " << run.sim_timestep << " s) in " << s << " s\n  RMS torque:";
+  for (size_t j = 0; j < run.joints.size(); ++j) std::cout << " " << run.joints[j] << " " << run.rms[static_cast<Eigen::Index>(j)];
+  std::cout << "\n  plugins: " << (run.plugins.empty() ? "none" : run.plugins) << "\n";
+  if (csv) {
+    std::string q, tau;
+    for (const auto& j : run.joints) q += (q.empty() ? "" : ",") + ("q:" + j), tau += (tau.empty() ? "" : ",") + ("tau:" + j);
+    std::cout << "next: spml import " << shell_quote(out) << " --t t --x " << shell_quote(q) << " --y " << shell_quote(tau)
+              << " --lowpass 10 --derive --drop-edges " << static_cast<int>(std::ceil(0.1 * o.rate)) << " --out DATA.h5\n";
+  }
+}
+
+}  // namespace
 
 void add_generate(CLI::App& app) {
-  auto* cmd = app.add_subcommand("generate", "Simulate a scenario of the paper and write its dataset");
+  auto* cmd = app.add_subcommand("generate", "Simulate a scenario of the paper, or measure a run of any MJCF robot (--model)");
   struct Args {
     std::string scenario, out, out_dir;
     bool all = false, quiet = false;
@@ -18,24 +99,30 @@ void add_generate(CLI::App& app) {
     std::string test_stride = "1";
   };
   auto a = std::make_shared<Args>();
+  auto model = std::make_shared<ModelArgs>();
   std::string names;
   for (const auto& n : scenario_names()) names += (names.empty() ? "" : ", ") + n;
   auto* sc = cmd->add_option("--scenario,-s", a->scenario, "one of: " + names)->check(CLI::IsMember(scenario_names()));
   auto* all = cmd->add_flag("--all", a->all, "generate every scenario into --out-dir as <scenario>.h5");
-  cmd->add_option("--out,-o", a->out, "output file (with --scenario)");
+  cmd->add_option("--out,-o", a->out, "output file (with --scenario or --model)");
   cmd->add_option("--out-dir", a->out_dir, "output folder (with --all)");
   cmd->add_option("--seed", a->seed, "random seed (same seed, same arrays)");
   cmd->add_option("--test-stride", a->test_stride, "SimDyn: keep every n-th 1 kHz test sample (a whole number >= 1)");
   cmd->add_flag("--quiet,-q", a->quiet, "no progress output");
+  add_model_options(cmd, *model);
   sc->excludes(all);
-  cmd->callback([a] {
+  cmd->callback([a, model] {
+    if (!model->model.empty()) {
+      if (!a->scenario.empty() || a->all) throw std::invalid_argument("choose one of --model, --scenario and --all");
+      return generate_model(*model, a->out, seed_option("--seed", a->seed));
+    }
     std::vector<std::pair<std::string, std::string>> jobs;
     if (a->all) {
       if (a->out_dir.empty()) throw std::invalid_argument("--all needs --out-dir");
       std::filesystem::create_directories(a->out_dir);
       for (const auto& n : scenario_names()) jobs.emplace_back(n, (std::filesystem::path(a->out_dir) / (n + ".h5")).string());
     } else {
-      if (a->scenario.empty()) throw std::invalid_argument("choose --scenario NAME or --all");
+      if (a->scenario.empty()) throw std::invalid_argument("choose --scenario NAME, --all or --model M.xml");
       if (a->out.empty()) throw std::invalid_argument("--scenario needs --out FILE");
       jobs.emplace_back(a->scenario, a->out);
     }
