@@ -1,6 +1,7 @@
 // Stage 4a, candidates: every force plugin with a regressor, on every joint that moves, and the
 // regressor columns of one configured plugin on one split.
 #include <algorithm>
+#include <cmath>
 
 #include "diagnosis.h"
 #include "spml/parse.h"
@@ -69,8 +70,32 @@ void Diagnosis::add_candidates(const spml_force_plugin& p, const std::vector<con
       }
       c.shape_range.emplace_back(lo, hi);
     }
+    if (std::string(p.name) == "ripple" && !bound_wavenumber(c, q.maxCoeff() - q.minCoeff())) continue;
     cands_.push_back(std::move(c));
   }
+}
+
+// A position-periodic effect is told from a smooth position-dependent residual only when the
+// stroke spans several of its periods: the ripple's wavenumber (`gear`, periods per radian
+// over 2 pi) is searched from min_ripple_periods periods over the stroke upwards, or fixed
+// at the drive's gear ratio when given. False (with a note) when nothing is left to search.
+bool Diagnosis::bound_wavenumber(Candidate& c, double stroke) {
+  for (size_t k = 0; k < c.shape.size(); ++k) {
+    if (std::string(c.shape[k]->key) != "gear") continue;
+    auto& [lo, hi] = c.shape_range[k];
+    if (opt_.ripple_gear > 0) {
+      lo = hi = opt_.ripple_gear;
+      return true;
+    }
+    lo = std::max(lo, std::ceil(opt_.min_ripple_periods * 2 * M_PI / std::max(stroke, 1e-12)));
+    if (lo > hi) {
+      not_tried_.push_back({{"effect", "ripple"}, {"joint", c.joint_name},
+                            {"reason", "the stroke (" + fmt(stroke) + " rad) spans fewer than " + fmt(opt_.min_ripple_periods) +
+                                           " periods of any wavenumber the plugin allows: a ripple cannot be told from a smooth residual"}});
+      return false;
+    }
+  }
+  return true;
 }
 
 std::vector<std::pair<std::string, std::string>> Diagnosis::config_of(const Candidate& c, const std::vector<double>& shape) const {
@@ -99,6 +124,7 @@ BlockColumns Diagnosis::columns(const PluginInstance& inst, const SplitData& s) 
   }
   if (!C.allFinite())
     throw PluginError("plugin '" + std::string(inst.plugin().name) + "' gave non-finite regressor values on split '" + s.name + "'");
+  filter_stacked(s.sos, C, s.N);
   return BlockColumns::from_dense(C, s.N, O);
 }
 

@@ -4,6 +4,10 @@
 #include <cmath>
 #include <filesystem>
 #include <sstream>
+#include <fcntl.h>
+#include <sys/file.h>
+#include <unistd.h>
+#include <stdexcept>
 
 #include "diagnosis.h"
 #include "report.h"
@@ -34,19 +38,109 @@ DiagnoseResult Diagnosis::run(const std::string& out_dir) {
   auto& T = result_.timings;
   result_.report["timings_s"] = {{"load", T.load}, {"search", T.search}, {"refits", T.refits}, {"rollouts", T.rollouts}, {"outputs", T.outputs}};
   result_.summary = report_summary(result_.report);
+  std::string json;
+  try {
+    json = result_.report.dump(2) + "\n";
+  } catch (const nlohmann::json::type_error& e) {
+    throw std::runtime_error("report.json: a path, joint, body or split name holds bytes that are not UTF-8 (" + std::string(e.what()) +
+                             "); nothing was written");
+  }
   if (!out_dir.empty()) {
     namespace fs = std::filesystem;
     write_text_atomic((fs::path(out_dir) / "report.md").string(), report_markdown(result_.report));
-    write_text_atomic((fs::path(out_dir) / "report.json").string(), result_.report.dump(2) + "\n");
+    write_text_atomic((fs::path(out_dir) / "report.json").string(), json);
   }
   return result_;
 }
 
+namespace {
+
+namespace fs = std::filesystem;
+// In the order they are moved into place: report.json last, so that a reader who sees it sees
+// the rest of the same run.
+const char* const kOutputs[] = {"extended.xml", "series.csv", "report.md", "report.json"};
+
+void refuse_inputs_among_outputs(const DiagnoseOptions& o, const fs::path& out) {
+  std::vector<std::string> inputs = {o.model, o.data};
+  inputs.insert(inputs.end(), o.cross.begin(), o.cross.end());
+  const fs::path plots = fs::weakly_canonical(out / "plots");
+  for (const auto& in : inputs) {
+    const fs::path p = fs::weakly_canonical(in);
+    bool hit = p.parent_path() == plots;
+    for (const char* name : kOutputs) hit |= p == fs::weakly_canonical(out / name);
+    if (hit)
+      throw std::runtime_error(in + ": is one of the files diagnose writes into --out " + out.string() +
+                               ": it would be overwritten; copy it elsewhere or choose another --out");
+  }
+}
+
+// The staged folder is removed on every way out; its files are moved into out_dir together.
+struct Staging {
+  fs::path dir;
+  ~Staging() {
+    std::error_code ec;
+    if (!dir.empty()) fs::remove_all(dir, ec);
+  }
+};
+
+void publish(const fs::path& staged, const fs::path& out) {
+  // One run's files at a time: a lock file in the folder, held while the files move.
+  const int fd = ::open((out / ".spml-diagnose.lock").c_str(), O_CREAT | O_RDWR | O_CLOEXEC, 0644);
+  if (fd >= 0) ::flock(fd, LOCK_EX);
+  std::error_code ec;
+  fs::remove_all(out / "plots", ec);   // a run without plots must not show the last run's
+  if (fs::exists(staged / "plots")) fs::rename(staged / "plots", out / "plots");
+  for (const char* name : kOutputs)
+    if (fs::exists(staged / name)) fs::rename(staged / name, out / name);
+  if (fd >= 0) {
+    ::flock(fd, LOCK_UN);
+    ::close(fd);
+  }
+}
+
+}  // namespace
+
 }  // namespace diagnose_detail
 
-DiagnoseResult diagnose(const DiagnoseOptions& options, const std::string& out_dir) {
-  diagnose_detail::Diagnosis d(options);
-  return d.run(out_dir);
+void DiagnoseOptions::check() const {
+  auto in = [](const char* name, double v, double lo, double hi) {
+    if (!std::isfinite(v) || v < lo || v > hi)
+      throw std::invalid_argument(std::string("diagnose option ") + name + " = " + diagnose_detail::fmt(v) + ": must be a finite number in [" +
+                                  diagnose_detail::fmt(lo) + ", " + diagnose_detail::fmt(hi) + "]");
+  };
+  if (model.empty()) throw std::invalid_argument("diagnose option model: no MJCF file given");
+  if (data.empty()) throw std::invalid_argument("diagnose option data: no dataset given");
+  if (fit_split.empty()) throw std::invalid_argument("diagnose option fit_split: empty");
+  in("holdout", holdout, 0.05, 0.9);
+  in("bic_threshold", bic_threshold, 0, 1e9);
+  in("min_gain", min_gain, 0, 1);
+  in("max_causes", max_causes, 1, 1000);
+  in("still_speed", still_speed, 0, 1e9);
+  in("rollout_seconds", rollout_seconds, 1e-3, 10);
+  in("rollouts", rollouts, 0, 10000);
+  in("min_ripple_periods", min_ripple_periods, 0, 1e6);
+  in("ripple_gear", ripple_gear, 0, 1e9);
+}
+
+DiagnoseResult diagnose(const DiagnoseOptions& options, const std::string& out_dir,
+                        const std::function<void(const std::string&)>& before_publish) {
+  using namespace diagnose_detail;
+  namespace fs = std::filesystem;
+  options.check();
+  Diagnosis d(options);
+  if (out_dir.empty()) return d.run("");
+  const fs::path out(out_dir);
+  refuse_inputs_among_outputs(options, out);
+  fs::create_directories(out);
+  Staging staged{out / (".spml-diagnose-" + std::to_string(::getpid()))};
+  fs::remove_all(staged.dir);
+  fs::create_directories(staged.dir);
+  DiagnoseResult r = d.run(staged.dir.string());
+  if (before_publish) before_publish(staged.dir.string());
+  if (!fs::exists(staged.dir / "plots"))
+    write_text_atomic((staged.dir / "report.md").string(), diagnose_detail::report_markdown(r.report, false));
+  publish(staged.dir, out);
+  return r;
 }
 
 }  // namespace spml

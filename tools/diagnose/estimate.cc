@@ -11,8 +11,9 @@ std::vector<const BlockColumns*> Diagnosis::blocks(const std::vector<int>& cause
   return out;
 }
 
-Fit Diagnosis::refit(const std::vector<int>& causes, bool base_free) const {
-  return fit_blocks(blocks(causes, base_free), fit_.y0, true);
+// robust: standard errors from the long-run covariance of the residuals (statistics.h).
+Fit Diagnosis::refit(const std::vector<int>& causes, bool base_free, bool robust) const {
+  return fit_blocks(blocks(causes, base_free), fit_.y0, true, robust ? fit_.N : 0);
 }
 
 // Residual of a fit on another split (test, cross): the causes' columns evaluated there.

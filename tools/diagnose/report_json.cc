@@ -33,6 +33,21 @@ void put_after(nlohmann::json& j, const nlohmann::json& after) {
 
 }  // namespace
 
+std::vector<std::string> term_subjects(const std::string& name) {
+  std::vector<std::string> out;
+  size_t start = 0;
+  for (;;) {
+    size_t end = std::string::npos;
+    for (const char* sep : {" + ", " - "}) end = std::min(end, name.find(sep, start));
+    const std::string term = name.substr(start, end == std::string::npos ? std::string::npos : end - start);
+    const auto colon = term.find(':');
+    if (colon != std::string::npos) out.push_back(term.substr(colon + 1));
+    if (end == std::string::npos) break;
+    start = end + 3;
+  }
+  return out;
+}
+
 nlohmann::json Diagnosis::per_joint(const Eigen::VectorXd& r, Eigen::Index N) const {
   nlohmann::json j = nlohmann::json::object();
   for (size_t o = 0; o < out_joints_.size(); ++o)
@@ -81,8 +96,8 @@ nlohmann::json Diagnosis::parameters_cause(const Fit& final_fit, MjcfEdits& edit
     params[name] = base_.model_values[i] + d;
     se[name] = e;
     prior[name] = base_.model_values[i];
-    for (size_t j = 0; j < reg_->joint_names().size(); ++j)
-      if (name.find(":" + reg_->joint_names()[j]) != std::string::npos) joints.insert(reg_->joint_names()[j]);
+    for (const auto& what : term_subjects(name))
+      if (std::find(reg_->joint_names().begin(), reg_->joint_names().end(), what) != reg_->joint_names().end()) joints.insert(what);
   }
   const nlohmann::json after = metrics(pf.residual, residual_on(test_, {}, true, pf));
   nlohmann::json j{{"effect", "parameters"}, {"joints", joints.empty() ? nlohmann::json(out_joints_) : nlohmann::json(joints)},
@@ -152,9 +167,11 @@ void Diagnosis::inertial_edit(const Eigen::VectorXd& pi, const std::string& body
   }
   if (why.empty())
     edits.inertials.push_back(in);
-  else
+  else {
+    parameters_partial_ = true;
     notes.push_back("body '" + body + "': the re-identified inertial parameters are not physically consistent (" + why +
                     "), so its inertial is not written; the extended model keeps the MJCF's");
+  }
 }
 
 // Effect cause i, in the order chosen, with its after-metrics along the path (causes superseded
@@ -203,6 +220,9 @@ nlohmann::json Diagnosis::effect_cause(size_t i, const Fit& final_fit, bool free
     const std::string name = "spml.plugin.diagnosed_" + std::string(c.plugin->name) + "_" + c.joint_name;
     if (config.empty())
       notes.push_back(std::string("plugin '") + c.plugin->name + "' cannot write its configuration (no write_config): " + name + " is not in the extended model");
+    else if (c.joint_name.find_first_of(" \t\n\r,") != std::string::npos)
+      notes.push_back("joint '" + c.joint_name + "' has a space or comma in its name, which a plugin declaration (joints=a,b) cannot hold: " +
+                      c.plugin->name + " on it is not in the extended model");
     else {
       edits.texts.emplace_back(name, "type=" + std::string(c.plugin->name) + " joints=" + c.joint_name + " " + config);
       j["declaration"] = edits.texts.back().second;
@@ -238,8 +258,17 @@ void Diagnosis::build_report(const std::string& out_dir) {
   R["settings"] = {{"bic_threshold", opt_.bic_threshold}, {"min_gain", opt_.min_gain}, {"max_causes", opt_.max_causes},
                    {"still_speed", opt_.still_speed}, {"candidates", cands_.size()}};
   R["baseline"] = metrics(fit_.y0, test_.y0);
+  R["parallel_filter"] = {{"source", filter_plan_.source == FilterPlan::Source::recorded   ? "recorded"
+                                     : filter_plan_.source == FilterPlan::Source::detected ? "detected"
+                                                                                           : "none"},
+                          {"applied", !fit_.sos.empty()}, {"torques_filtered", !fit_.sos.empty() && filter_plan_.torques},
+                          {"order", filter_plan_.lowpass.order}, {"cutoff_hz", filter_plan_.lowpass.cutoff_hz},
+                          {"why", filter_plan_.description}};
+  R["statistics"] = {{"standard_errors", "autocorrelation-robust (batch means, Andrews bandwidth)"},
+                     {"equations", fit_.y0.size()}, {"parameters_n_eff", parameters_n_eff_},
+                     {"parameters_delta_bic", parameters_delta_bic_}, {"parameters_contradicted", parameters_contradicted_}};
   const bool free = parameters_named_;
-  const Fit final_fit = refit(kept_effects(), free);
+  const Fit final_fit = refit(kept_effects(), free, true);
   const Eigen::VectorXd final_test = residual_on(test_, kept_effects(), free, final_fit);
   nlohmann::json causes = nlohmann::json::array(), cross_after = nlohmann::json::array();
   MjcfEdits edits;
@@ -250,7 +279,8 @@ void Diagnosis::build_report(const std::string& out_dir) {
   }
   for (size_t i = 0; i < causes_.size(); ++i) causes.push_back(effect_cause(i, final_fit, free, edits, notes, cross_after));
   R["causes"] = causes;
-  R["final"] = metrics(final_fit.residual, final_test);
+  // The fit's own prediction; `final` is set by verify() from the written model itself.
+  R["final_internal"] = metrics(final_fit.residual, final_test);
   if (!cross_.empty()) R["cross"] = cross_report(final_fit, free, cross_after);
   nlohmann::json still = nlohmann::json::array();
   for (size_t j = 0; j < still_.size(); ++j)
@@ -260,11 +290,10 @@ void Diagnosis::build_report(const std::string& out_dir) {
   R["not_identifiable"] = still;
   R["not_tried"] = not_tried_;
   result_.timings.outputs += since(t0);
-  const Eigen::VectorXd final_pred_fit = fit_.b - final_fit.residual;
-  verify(out_dir, edits, notes, final_pred_fit);
+  const auto written = verify(out_dir, edits, notes, fit_.b - final_fit.residual);
   R["notes"] = notes;
   t0 = Clock::now();
-  write_series(out_dir, final_pred_fit, test_.b - final_test);
+  write_series(out_dir, written.first, written.second);
   result_.timings.outputs += since(t0);
 }
 
