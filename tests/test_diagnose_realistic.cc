@@ -17,6 +17,7 @@
 #include "diagnose_draws.h"
 #include "spml/diagnose.h"
 #include "spml/import.h"
+#include "spml/signal.h"
 #include "test_util.h"
 
 namespace spml {
@@ -134,6 +135,44 @@ TEST(DiagnoseRealistic, CleanDrawsNameNothingAndFilteredCoulombIsCoulomb) {
     std::cout << "\n";
   }
   std::cout << "false or missed causes: " << failures << " of " << cases.size() << "\n";
+}
+
+}  // namespace
+}  // namespace spml
+
+namespace spml {
+namespace {
+
+// spml import records the low-pass it applied (README, spml/1 `filter`); a reader parses it
+// back and ignores what it does not understand.
+TEST(DiagnoseRealistic, ImportRecordsItsFilter) {
+  Table t;
+  t.source = "t";
+  t.names = {"t", "q:a", "tau:a"};
+  const int N = 400;
+  t.columns.assign(3, Eigen::VectorXd(N));
+  for (int i = 0; i < N; ++i) t.columns[0][i] = 0.001 * i, t.columns[1][i] = std::sin(0.01 * i), t.columns[2][i] = std::cos(0.01 * i);
+  ImportSpec spec;
+  spec.x = {"q:a"};
+  spec.y = {"tau:a"};
+  spec.t = "t";
+  spec.conditioning.lowpass_hz = 15;
+  spec.conditioning.derive = true;
+  const Dataset ds = table_to_dataset(t, spec);
+  ASSERT_TRUE(ds.provenance.count("filter"));
+  EXPECT_EQ(ds.provenance.at("filter"), "butterworth order=4 cutoff=15 zero-phase");
+  EXPECT_EQ(ds.provenance.at("derivatives"), "central-difference");
+  const auto dir = test::temp_dir("diagnose-filter-attr");
+  write_dataset((dir / "d.h5").string(), ds);
+  const auto rec = parse_lowpass_record(read_dataset((dir / "d.h5").string()).provenance.at("filter"));
+  ASSERT_TRUE(rec.has_value());
+  EXPECT_EQ(rec->order, 4);
+  EXPECT_EQ(rec->cutoff_hz, 15);
+  EXPECT_FALSE(parse_lowpass_record("chebyshev order=4 cutoff=15 zero-phase").has_value());
+  EXPECT_FALSE(parse_lowpass_record("butterworth order=3 cutoff=15 zero-phase").has_value());
+  EXPECT_FALSE(parse_lowpass_record("butterworth order=4 cutoff=nan zero-phase").has_value());
+  spec.conditioning.lowpass_hz = 0;
+  EXPECT_FALSE(table_to_dataset(t, spec).provenance.count("filter"));
 }
 
 }  // namespace
