@@ -37,6 +37,27 @@ void check_options(const MeasurementOptions& o) {
   if (!(o.jitter >= 0)) bad("jitter must be >= 0 s");
 }
 
+// One controller tick (after mj_step1, so qM and qfrc_bias belong to this state). PD (w > 0):
+// tau = bias + M(q) (w^2 (q_ref - q) + 2 w (qd_ref - qd)), the PD error scaled by the inertia
+// matrix so every joint is critically damped at bandwidth w whatever the coupling (a diagonal
+// gain on a strongly coupled chain rings and goes unstable). Open loop (w = 0): tau = M(q) qdd_ref.
+void control(const mjModel* m, mjData* d, const ReferenceTrack& ref, Eigen::Index k, double w, Eigen::VectorXd& acc,
+             Eigen::VectorXd& tau, MeasuredRun& run) {
+  for (int j = 0; j < m->njnt; ++j) {
+    const int a = m->jnt_qposadr[j], v = m->jnt_dofadr[j];
+    acc[v] = w > 0 ? w * w * (ref.q(k, j) - d->qpos[a]) + 2 * w * (ref.qd(k, j) - d->qvel[v]) : ref.qdd(k, j);
+    run.tick_qpos(k, j) = d->qpos[a];
+    run.tick_qvel(k, j) = d->qvel[v];
+  }
+  mj_mulM(m, d, tau.data(), acc.data());
+  for (int j = 0; j < m->njnt; ++j) {
+    const int v = m->jnt_dofadr[j];
+    if (w > 0) tau[v] += d->qfrc_bias[v];
+    run.tick_tau(k, j) = tau[v];
+    d->qfrc_applied[v] = tau[v];
+  }
+}
+
 // Runs the closed (or open) loop over `ticks` controller periods of `substeps` steps each.
 void run_loop(const mjModel* m, mjData* d, ForceEffects& fx, const ReferenceTrack& ref, const MeasurementOptions& o,
               int substeps, MeasuredRun& run, Trace& trace) {
@@ -45,36 +66,23 @@ void run_loop(const mjModel* m, mjData* d, ForceEffects& fx, const ReferenceTrac
   const double h = m->opt.timestep;
   for (int j = 0; j < nj; ++j) d->qpos[m->jnt_qposadr[j]] = ref.q(0, j), d->qvel[m->jnt_dofadr[j]] = ref.qd(0, j);
   mj_forward(m, d);
-  // Critically damped PD per joint on the joint's own inertia at the start.
   const double w = 2 * M_PI * o.bandwidth;
-  Eigen::VectorXd inertia(nj);
-  for (int j = 0; j < nj; ++j) inertia[j] = d->qM[m->dof_Madr[m->jnt_dofadr[j]]];
+  Eigen::VectorXd acc(m->nv), tau(m->nv);
   for (auto* M : {&run.tick_qpos, &run.tick_qvel, &run.tick_qacc, &run.tick_tau}) M->resize(ticks, nj);
   for (Eigen::Index k = 0; k < ticks; ++k) {
     for (int s = 0; s < substeps; ++s) {
       mj_step1(m, d);   // positions and velocities: bias forces for this state
-      if (s == 0) {
-        for (int j = 0; j < nj; ++j) {
-          const int a = m->jnt_qposadr[j], v = m->jnt_dofadr[j];
-          const double tau = o.controller == "pd" ? d->qfrc_bias[v] + inertia[j] * (w * w * (ref.q(k, j) - d->qpos[a]) +
-                                                                                    2 * w * (ref.qd(k, j) - d->qvel[v]))
-                                                  : inertia[j] * ref.qdd(k, j);
-          run.tick_qpos(k, j) = d->qpos[a];
-          run.tick_qvel(k, j) = d->qvel[v];
-          run.tick_tau(k, j) = tau;
-          d->qfrc_applied[v] = tau;
-        }
-      }
+      if (s == 0) control(m, d, ref, k, o.controller == "pd" ? w : 0.0, acc, tau, run);
       trace.time.push_back(d->time);
       trace.qpos.push_back(Eigen::Map<const Eigen::VectorXd>(d->qpos, m->nq));
       mj_step2(m, d);
       fx.advance(d, h);
       if (s == 0)
         for (int j = 0; j < nj; ++j) run.tick_qacc(k, j) = d->qacc[m->jnt_dofadr[j]];
-      for (int i = 0; i < m->nq; ++i)
-        if (!std::isfinite(d->qpos[i]))
-          throw std::runtime_error("generate: the simulation diverged at t = " + std::to_string(d->time) +
-                                   " s; lower --bandwidth or the model's timestep");
+      // MuJoCo resets the state when the acceleration blows up; a run must not hide that.
+      if (d->warning[mjWARN_BADQACC].number > 0)
+        throw std::runtime_error("generate: the simulation went unstable at t = " + std::to_string(d->time) +
+                                 " s; lower --bandwidth or the model's timestep");
     }
   }
   trace.time.push_back(d->time);

@@ -19,6 +19,7 @@ struct ModelArgs {
               bandwidth = "4", torque_noise = "0.01", encoder_bits = "18", jitter = "0";
   std::vector<std::string> plugin_paths;
   bool derive = false;
+  CLI::Option* duration_option = nullptr;   // given or not: a file excitation's default is its span
 };
 
 double number_option(const std::string& option, const std::string& text, double lo, double hi) {
@@ -33,7 +34,8 @@ void add_model_options(CLI::App* cmd, ModelArgs& m) {
   cmd->add_option("--plugin-path", m.plugin_paths, "extra force-plugin library or folder (also $SPML_PLUGIN_PATH)");
   cmd->add_option("--excitation", m.excitation, "multisine | chirp | file:PATH (CSV with t and q:<joint>)")->capture_default_str();
   cmd->add_option("--amplitude", m.amplitude, "peak reference excursion [rad] (slide joints: 1/8 of it in m)")->capture_default_str();
-  cmd->add_option("--duration", m.duration, "logged seconds (file excitation: the file's span unless given)")->capture_default_str();
+  m.duration_option = cmd->add_option("--duration", m.duration, "logged seconds (file excitation: the file's span unless given)")
+                          ->capture_default_str();
   cmd->add_option("--rate", m.rate, "controller and logger rate [Hz]")->capture_default_str();
   cmd->add_option("--controller", m.controller, "pd (PD + bias-force compensation) | torque (open loop)")->capture_default_str();
   cmd->add_option("--bandwidth", m.bandwidth, "PD closed-loop bandwidth [Hz]")->capture_default_str();
@@ -49,7 +51,7 @@ MeasurementOptions measurement_options(const ModelArgs& a, std::uint64_t seed) {
   o.excitation.amplitude = number_option("--amplitude", a.amplitude, 1e-6, 1e3);
   o.excitation.seed = seed;
   const bool from_file = a.excitation.rfind("file:", 0) == 0;
-  o.duration = from_file && a.duration == "20" ? reference_file_duration(a.excitation.substr(5))
+  o.duration = from_file && a.duration_option->count() == 0 ? reference_file_duration(a.excitation.substr(5))
                                                : number_option("--duration", a.duration, 1e-3, 1e6);
   o.rate = number_option("--rate", a.rate, 1, 1e6);
   o.controller = a.controller;
@@ -80,6 +82,9 @@ void generate_model(const ModelArgs& a, const std::string& out, std::uint64_t se
             << " joints, integration step " << run.sim_timestep << " s) in " << s << " s\n  RMS torque:";
   for (size_t j = 0; j < run.joints.size(); ++j) std::cout << " " << run.joints[j] << " " << run.rms[static_cast<Eigen::Index>(j)];
   std::cout << "\n  plugins: " << (run.plugins.empty() ? "none" : run.plugins) << "\n";
+  if (!csv && !a.derive)
+    std::cout << "  positions only: diagnose and identify need qd:/qdd: - write a .csv log for spml import --lowpass --derive, "
+                 "or add --derive (raw central differences)\n";
   if (csv) {
     std::string q, tau;
     for (const auto& j : run.joints) q += (q.empty() ? "" : ",") + ("q:" + j), tau += (tau.empty() ? "" : ",") + ("tau:" + j);

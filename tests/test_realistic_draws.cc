@@ -1,0 +1,229 @@
+// Hidden-effect draws that look like real logs (issue #20 item 1). Each draw: a random 2-7
+// joint spatial chain (test::random_chain), nothing or one effect of the plugin vocabulary
+// (or a 2 kg payload) hidden in the true model, a forward simulation under the PD controller
+// (spml generate --model's code), recorded with encoder quantization, torque noise and
+// jittered sampling instants, positions only. Velocities and accelerations come from the
+// import code path twice: low-pass + central differences (spml import --lowpass --derive)
+// and raw central differences. spml diagnose runs on the model the user has (no effect).
+//
+// ConfusionTable (CI): prints the table per noise level and derivative path, and asserts what
+// holds today (the import path puts a cause on the hidden effect's joint). DISABLED_CleanDrawsGiveNoCauseAndEffectsAreNamed (ctest label
+// realistic-pending, off unless -DSPML_REALISTIC_PENDING=ON): the issue's bar, every cell.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <fstream>
+#include <iomanip>
+#include <iostream>
+#include <map>
+#include <set>
+
+#include "spml/dataset.h"
+#include "spml/diagnose.h"
+#include "spml/envs/measured_run.h"
+#include "test_util.h"
+
+namespace spml {
+namespace {
+
+struct NoiseLevel {
+  std::string name;
+  double torque_noise;
+  int bits;
+  double rate, jitter;
+};
+const std::vector<NoiseLevel> kLevels = {
+    {"torque 0.5 %, 20 bit, 2 kHz, jitter 2 us", 0.005, 20, 2000, 2e-6},
+    {"torque 1 %, 18 bit, 1 kHz, jitter 10 us", 0.01, 18, 1000, 1e-5},
+    {"torque 2 %, 16 bit, 500 Hz, jitter 40 us", 0.02, 16, 500, 4e-5},
+};
+const std::vector<std::string> kEffects = {"coulomb", "viscous", "stribeck", "friction_band", "ripple", "offset", "asymmetric_friction", "payload"};
+constexpr int kDrawsPerLevel = 8;       // 2 clean + 6 effects
+constexpr double kDuration = 10;        // s logged per draw
+constexpr double kOutRate = 200;        // Hz after decimation (diagnose's cost grows with rows)
+constexpr double kLowpass = 10;         // Hz: the excitation tops at 1 Hz, the PD's bandwidth is 4 Hz
+
+struct Draw {
+  std::string hidden = "clean", label;
+  std::set<std::string> expected;       // "effect@joint" or "parameters"
+  std::string user_path, true_path;
+  int joints = 0;
+};
+
+// The draw's models: a chain, and the same chain with the effect (or payload) hidden.
+Draw make_draw(int level, int index, const std::filesystem::path& dir) {
+  std::mt19937_64 rng(0x7ea10000u + static_cast<unsigned>(100 * level + index));
+  Draw d;
+  if (index >= 2) d.hidden = kEffects[static_cast<size_t>(level * 6 + index - 2) % kEffects.size()];
+  std::uniform_int_distribution<int> pick_n(2, 7);
+  d.joints = pick_n(rng);
+  const auto seed = rng();
+  std::mt19937_64 chain_rng(seed), again(seed);
+  const std::string user = test::random_chain(chain_rng, d.joints, 0);
+  d.label = "chain" + std::to_string(d.joints);
+  d.user_path = (dir / ("user" + std::to_string(level) + "_" + std::to_string(index) + ".xml")).string();
+  d.true_path = (dir / ("true" + std::to_string(level) + "_" + std::to_string(index) + ".xml")).string();
+  std::ofstream(d.user_path) << user;
+  std::string truth = user;
+  if (d.hidden == "payload") {
+    truth = test::random_chain(again, d.joints, 2.0);
+    d.expected = {"parameters"};
+  } else if (d.hidden != "clean") {
+    // The effect's size: 8-14 % of the joint's RMS torque on the user's model (a clean run).
+    MeasurementOptions probe;
+    probe.duration = 2;
+    probe.torque_noise = 0;
+    const MeasuredRun clean = simulate_measured(d.user_path, probe);
+    std::uniform_int_distribution<int> pick_joint(0, d.joints - 1);
+    const int j = pick_joint(rng);
+    const std::string joint = "j" + std::to_string(j);
+    std::map<std::string, double> values;
+    truth = test::with_declarations(user, {test::effect_text(d.hidden, joint, 0.01 * clean.rms[j], rng, values)});
+    d.expected = {d.hidden + "@" + joint};
+  }
+  std::ofstream(d.true_path) << truth;
+  return d;
+}
+
+// The run's data through spml import's conditioning: low-pass + differences, or raw differences.
+std::string condition(const MeasuredRun& run, const NoiseLevel& n, bool lowpass, const std::string& path) {
+  ImportSpec spec;
+  for (const auto& j : run.joints) spec.x.push_back("q:" + j), spec.y.push_back("tau:" + j);
+  spec.t = "t";
+  spec.conditioning.derive = true;
+  spec.conditioning.lowpass_hz = lowpass ? kLowpass : 0;
+  spec.conditioning.drop_edges = lowpass ? static_cast<int>(0.2 * n.rate) : 2;
+  spec.conditioning.decimate = static_cast<int>(n.rate / kOutRate);
+  write_dataset(path, table_to_dataset(measured_table(run, path), spec));
+  return path;
+}
+
+struct Outcome {
+  std::string level, path, hidden, label, named;   // named: "nothing" or "a@j0+b@j1"
+  std::set<std::string> named_set, expected;
+  double seconds = 0;
+  // Viscous friction on a joint with MJCF damping is a damping change: "parameters" alone is
+  // as right as naming it.
+  bool exact() const {
+    return named_set == expected || (hidden == "viscous" && named_set == std::set<std::string>{"parameters"});
+  }
+  // A cause named on the hidden effect's joint ("parameters" for a payload or viscous friction).
+  bool located() const {
+    for (const auto& e : expected) {
+      const std::string joint = e.find('@') == std::string::npos ? "" : e.substr(e.find('@'));
+      for (const auto& n : named_set)
+        if ((!joint.empty() && n.size() > joint.size() && n.compare(n.size() - joint.size(), joint.size(), joint) == 0) ||
+            (n == "parameters" && (e == "parameters" || hidden == "viscous")))
+          return true;
+    }
+    return expected.empty();
+  }
+};
+
+std::vector<Outcome> run_draws() {
+  const auto dir = test::temp_dir("realistic");
+  std::vector<Outcome> out;
+  for (size_t l = 0; l < kLevels.size(); ++l) {
+    const NoiseLevel& n = kLevels[l];
+    for (int i = 0; i < kDrawsPerLevel; ++i) {
+      const Draw d = make_draw(static_cast<int>(l), i, dir);
+      MeasurementOptions o;
+      o.duration = kDuration;
+      o.rate = n.rate;
+      o.torque_noise = n.torque_noise;
+      o.encoder_bits = n.bits;
+      o.jitter = n.jitter;
+      o.seed = 1000 * l + static_cast<unsigned>(i);
+      o.excitation.seed = o.seed + 17;
+      const MeasuredRun run = simulate_measured(d.true_path, o);
+      for (const bool lowpass : {true, false}) {
+        const auto start = std::chrono::steady_clock::now();
+        DiagnoseOptions opt;
+        opt.model = d.user_path;
+        opt.data = condition(run, n, lowpass, (dir / ("d" + std::to_string(l) + "_" + std::to_string(i) + ".h5")).string());
+        opt.rollouts = 0;
+        const auto r = diagnose(opt, "").report;
+        Outcome c{n.name, lowpass ? "lowpass+derive" : "raw differences", d.hidden, d.label, "", {}, d.expected, 0};
+        for (const auto& cause : r["causes"]) {
+          if (cause.contains("superseded_by")) continue;
+          const std::string e = cause["effect"];
+          const std::string name = e == "parameters" ? e : e + "@" + cause["joints"][0].get<std::string>();
+          c.named_set.insert(name);
+          c.named += (c.named.empty() ? "" : "+") + name;
+        }
+        if (c.named.empty()) c.named = "nothing";
+        c.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        std::string expected;
+        for (const auto& e : d.expected) expected += e + " ";
+        std::cout << "level " << l << " draw " << i << " " << std::setw(7) << d.label << " " << std::setw(15) << c.path << "  hidden "
+                  << std::setw(24) << (expected.empty() ? "nothing" : expected) << " named " << c.named << "  (" << std::fixed
+                  << std::setprecision(1) << c.seconds << " s)" << std::defaultfloat << (c.exact() ? "" : "  <-- differs") << std::endl;
+        out.push_back(c);
+      }
+    }
+  }
+  return out;
+}
+
+// Rows: hidden effect (or clean) and how many draws; columns: how many of them named that
+// cause (on any joint; "nothing" when none was named). A draw naming two causes counts twice.
+void print_tables(const std::vector<Outcome>& all) {
+  std::map<std::pair<std::string, std::string>, std::vector<const Outcome*>> groups;
+  for (const auto& o : all) groups[{o.level, o.path}].push_back(&o);
+  std::vector<std::string> cols = {"nothing", "parameters"};
+  for (const auto& e : kEffects)
+    if (e != "payload") cols.push_back(e);
+  for (const auto& [key, items] : groups) {
+    std::map<std::string, std::map<std::string, int>> table;
+    int exact = 0;
+    for (const Outcome* o : items) {
+      table[o->hidden]["draws"]++;
+      std::set<std::string> named;
+      for (const auto& n : o->named_set) named.insert(n.substr(0, n.find('@')));
+      if (named.empty()) named.insert("nothing");
+      for (const auto& n : named) table[o->hidden][n]++;
+      exact += o->exact();
+    }
+    std::cout << "\nconfusion table: " << key.first << ", " << key.second << " (" << exact << "/" << items.size()
+              << " named exactly, joint included)\n" << std::setw(20) << "hidden \\ named" << std::setw(6) << "draws";
+    for (const auto& c : cols) std::cout << std::setw(static_cast<int>(c.size()) + 2) << c;
+    std::cout << "\n";
+    for (auto& [h, row] : table) {
+      std::cout << std::setw(20) << h << std::setw(6) << row["draws"];
+      for (const auto& c : cols) std::cout << std::setw(static_cast<int>(c.size()) + 2) << (row.count(c) ? std::to_string(row[c]) : ".");
+      std::cout << "\n";
+    }
+  }
+}
+
+const std::vector<Outcome>& outcomes() {
+  static const std::vector<Outcome> all = [] {
+    const auto start = std::chrono::steady_clock::now();
+    auto v = run_draws();
+    print_tables(v);
+    std::cout << "\n" << v.size() / 2 << " draws x 2 derivative paths in " << std::fixed << std::setprecision(1)
+              << std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() << " s\n" << std::defaultfloat;
+    return v;
+  }();
+  return all;
+}
+
+TEST(RealisticDraws, ConfusionTable) {
+  const auto& all = outcomes();
+  ASSERT_EQ(all.size(), 2u * kLevels.size() * kDrawsPerLevel);
+  // What holds today: through the import path (low-pass + differences) every hidden effect
+  // gets a cause on its own joint (or "parameters" for a payload or viscous friction). Which
+  // cause, and clean draws, are the pending test's bar below.
+  for (const auto& o : all)
+    if (o.path == "lowpass+derive" && o.hidden != "clean") {
+      EXPECT_TRUE(o.located()) << o.level << ": " << o.label << " hidden " << o.hidden << ", named " << o.named;
+    }
+}
+
+TEST(RealisticDraws, DISABLED_CleanDrawsGiveNoCauseAndEffectsAreNamed) {
+  for (const auto& o : outcomes())
+    EXPECT_TRUE(o.exact()) << o.level << ", " << o.path << ": " << o.label << " hidden " << o.hidden << ", named " << o.named;
+}
+
+}  // namespace
+}  // namespace spml
