@@ -248,7 +248,7 @@ nlohmann::json Diagnosis::cross_report(const Fit& final_fit, bool free, const nl
 void Diagnosis::build_report(const std::string& out_dir) {
   auto t0 = Clock::now();
   nlohmann::json& R = result_.report;
-  R["format"] = "spml-diagnose/1";
+  R["format"] = "spml-diagnose/2";
   R["model"] = opt_.model;
   R["data"] = opt_.data;
   R["fit_split"] = opt_.fit_split;
