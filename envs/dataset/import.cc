@@ -510,6 +510,11 @@ Dataset table_to_dataset(const Table& table, const ImportSpec& spec) {
   }
   ds.provenance["source"] = table.source;
   ds.provenance["generator"] = "spml import";
+  // What the signals went through, so that consumers can filter their model columns alike
+  // (README, spml/1: `filter`, `derivatives`).
+  if (spec.conditioning.lowpass_hz > 0)
+    ds.provenance["filter"] = lowpass_record_text({spec.conditioning.filter_order, spec.conditioning.lowpass_hz});
+  if (spec.conditioning.derive) ds.provenance["derivatives"] = "central-difference";
   validate(ds, table.source);
   return ds;
 }

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <sstream>
 #include <stdexcept>
 
 namespace spml {
@@ -97,6 +98,32 @@ Eigen::VectorXd interpolate(const Eigen::VectorXd& t, const Eigen::VectorXd& x, 
     out[i] = x[k] + std::clamp(w, 0.0, 1.0) * (x[k + 1] - x[k]);
   }
   return out;
+}
+
+std::string lowpass_record_text(const LowpassRecord& f) {
+  std::ostringstream s;
+  s.precision(17);
+  s << "butterworth order=" << f.order << " cutoff=" << f.cutoff_hz << " zero-phase";
+  return s.str();
+}
+
+std::optional<LowpassRecord> parse_lowpass_record(const std::string& text) {
+  std::istringstream in(text);
+  std::string kind, order, cutoff, phase, extra;
+  if (!(in >> kind >> order >> cutoff >> phase) || (in >> extra)) return std::nullopt;
+  if (kind != "butterworth" || phase != "zero-phase" || order.rfind("order=", 0) != 0 || cutoff.rfind("cutoff=", 0) != 0) return std::nullopt;
+  LowpassRecord f;
+  try {
+    size_t used = 0;
+    f.order = std::stoi(order.substr(6), &used);
+    if (used != order.size() - 6) return std::nullopt;
+    f.cutoff_hz = std::stod(cutoff.substr(7), &used);
+    if (used != cutoff.size() - 7) return std::nullopt;
+  } catch (const std::exception&) {
+    return std::nullopt;
+  }
+  if (f.order < 2 || f.order % 2 || !(f.cutoff_hz > 0) || !std::isfinite(f.cutoff_hz)) return std::nullopt;
+  return f;
 }
 
 }  // namespace spml

@@ -34,21 +34,27 @@ void add_diagnose(CLI::App& app) {
   cmd->add_option("--still-speed", o->still_speed, "a joint whose |qd| never exceeds this does not move")->capture_default_str()->check(finite_number(0.0, 1e9));
   cmd->add_option("--rollout-seconds", o->rollout_seconds, "length of each rollout")->capture_default_str()->check(finite_number(1e-3, 10.0));
   cmd->add_option("--rollouts", o->rollouts, "number of rollouts (0: none)")->capture_default_str()->check(CLI::Range(0, 10000));
+  cmd->add_option("--min-ripple-periods", o->min_ripple_periods, "ripple is searched only at wavenumbers whose periods the stroke spans this often")
+      ->capture_default_str()->check(finite_number(0.0, 1e6));
+  cmd->add_option("--ripple-gear", o->ripple_gear, "the drive's gear ratio: ripple is searched at this wavenumber only (0: search)")
+      ->capture_default_str()->check(finite_number(0.0, 1e9));
   cmd->add_flag("--no-plots", *no_plots, "do not draw plots/ (needs /usr/bin/python3 with matplotlib)");
   cmd->callback([=] {
     add_plugin_paths(*paths);
     for (const auto& w : force_plugins().warnings()) std::cerr << "spml: warning: " << w << "\n";
-    const DiagnoseResult r = diagnose(*o, *out);
+    o->check();
+    auto plots = [&](const std::string& staged) {
+      if (*no_plots) return;
+      const std::string script = (std::filesystem::path(spml_share_dir()) / "plots" / "diagnose_plots.py").string();
+      const std::string command = "/usr/bin/python3 " + shell_quote(script) + " " + shell_quote(staged);
+      if (std::system(command.c_str()) != 0)
+        std::cerr << "spml: warning: plots not drawn (" << command << " failed; is python3-matplotlib installed?)\n";
+    };
+    const DiagnoseResult r = diagnose(*o, *out, plots);
     std::cout << r.summary;
     const auto& t = r.report["timings_s"];
     std::cout << "  time: search " << t["search"].get<double>() << " s, refits " << t["refits"].get<double>() << " s, rollouts "
               << t["rollouts"].get<double>() << " s, load " << t["load"].get<double>() << " s, outputs " << t["outputs"].get<double>() << " s\n";
-    if (!*no_plots) {
-      const std::string script = (std::filesystem::path(spml_share_dir()) / "plots" / "diagnose_plots.py").string();
-      const std::string command = "/usr/bin/python3 " + shell_quote(script) + " " + shell_quote(*out);
-      if (std::system(command.c_str()) != 0)
-        std::cerr << "spml: warning: plots not drawn (" << command << " failed; is python3-matplotlib installed?)\n";
-    }
     std::cout << "  wrote " << *out << "/report.json, report.md, extended.xml, series.csv" << (*no_plots ? "" : ", plots/") << "\n";
   });
 }

@@ -1,4 +1,5 @@
 #include "design.h"
+#include "statistics.h"
 
 #include <Eigen/Dense>
 #include <cmath>
@@ -36,7 +37,7 @@ BlockColumns BlockColumns::from_dense(const Eigen::MatrixXd& M, Eigen::Index row
   return b;
 }
 
-Fit fit_blocks(const std::vector<const BlockColumns*>& blocks, const Eigen::VectorXd& y, bool want_q) {
+Fit fit_blocks(const std::vector<const BlockColumns*>& blocks, const Eigen::VectorXd& y, bool want_q, Eigen::Index hac_rows_per_output) {
   Eigen::Index cols = 0;
   for (auto* b : blocks) cols += b->cols;
   Eigen::MatrixXd F(y.size(), cols);
@@ -74,10 +75,20 @@ Fit fit_blocks(const std::vector<const BlockColumns*>& blocks, const Eigen::Vect
   const double dof = std::max<double>(1.0, static_cast<double>(y.size() - rank));
   const double sigma2 = fit.rss / dof;
   Eigen::MatrixXd Rinv = R11.triangularView<Eigen::Upper>().solve(Eigen::MatrixXd::Identity(rank, rank));
+  // Covariance of z = R11^-1 Q^T y: sigma^2 R11^-1 R11^-T for white residuals; with a long-run
+  // covariance S of the rows q_i r_i, R11^-1 S R11^-T (sandwich), scaled by n / (n - rank).
+  Eigen::VectorXd var_z(rank);
+  if (hac_rows_per_output > 0) {
+    const Eigen::MatrixXd Z = Qfull.array().colwise() * fit.residual.array();
+    const Eigen::MatrixXd V = Rinv * long_run_covariance(Z, fit.residual, hac_rows_per_output) * Rinv.transpose();
+    var_z = V.diagonal() * (static_cast<double>(y.size()) / dof);
+  } else {
+    for (int i = 0; i < rank; ++i) var_z[i] = sigma2 * Rinv.row(i).squaredNorm();
+  }
   for (int i = 0; i < rank; ++i) {
     const int k = perm[i];
     fit.coef[k] = z[i] / scale[k];
-    fit.stderr_[k] = std::sqrt(sigma2 * Rinv.row(i).squaredNorm()) / scale[k];
+    fit.stderr_[k] = std::sqrt(std::max(var_z[i], 0.0)) / scale[k];
     fit.determined[static_cast<size_t>(k)] = true;
   }
   if (want_q) fit.Q = std::move(Qfull);

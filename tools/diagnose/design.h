@@ -31,7 +31,9 @@ struct Fit {
   Eigen::VectorXd residual;   // y - F coef on the fit rows
   Eigen::MatrixXd Q;          // orthonormal basis of the determined columns (fit rows)
 };
-Fit fit_blocks(const std::vector<const BlockColumns*>& blocks, const Eigen::VectorXd& y, bool want_q);
+// hac_rows_per_output > 0: standard errors robust to autocorrelation within each output's
+// rows (statistics.h), else the ordinary ones (white residuals).
+Fit fit_blocks(const std::vector<const BlockColumns*>& blocks, const Eigen::VectorXd& y, bool want_q, Eigen::Index hac_rows_per_output = 0);
 
 // What adding block C to a fit with basis Q and residual r gains: the drop of the residual
 // sum of squares and the number of new independent directions (rank increase).

@@ -24,6 +24,34 @@ XMLElement* find_named(XMLElement* root, const char* tag, const std::string& nam
   return nullptr;
 }
 
+// Joints and bodies are defined under <worldbody> only (an <equality><joint name=...> or a
+// <sensor> refers to them by the same attribute and must not be edited).
+XMLElement* find_in_worldbody(XMLElement* root, const char* tag, const std::string& name) {
+  for (XMLElement* w = root->FirstChildElement("worldbody"); w; w = w->NextSiblingElement("worldbody"))
+    if (XMLElement* hit = find_named(w, tag, name)) return hit;
+  return nullptr;
+}
+
+// An XML comment may not hold "--" (a data path with "-->" would end it and inject markup).
+std::string comment_text(std::string s) {
+  for (size_t at; (at = s.find("--")) != std::string::npos;) s.replace(at, 2, "- -");
+  if (!s.empty() && s.back() == '-') s += ' ';
+  return s;
+}
+
+// A <custom><text> name not yet used in the document: re-diagnosing an extended model must
+// not repeat a name MuJoCo requires to be unique.
+std::string unique_text_name(XMLElement* custom, const std::string& name) {
+  auto used = [&](const std::string& n) {
+    for (XMLElement* t = custom->FirstChildElement("text"); t; t = t->NextSiblingElement("text"))
+      if (const char* v = t->Attribute("name"); v && n == v) return true;
+    return false;
+  };
+  std::string out = name;
+  for (int k = 2; used(out); ++k) out = name + "_" + std::to_string(k);
+  return out;
+}
+
 void for_each_element(XMLElement* root, const std::function<void(XMLElement*)>& f) {
   for (XMLElement* e = root->FirstChildElement(); e; e = e->NextSiblingElement()) {
     f(e);
@@ -62,7 +90,7 @@ std::string write_extended_mjcf(const std::string& model_path, const MjcfEdits& 
   });
 
   for (const auto& [joint, attrs] : edits.joint_attributes) {
-    XMLElement* e = find_named(root, "joint", joint);
+    XMLElement* e = find_in_worldbody(root, "joint", joint);
     if (!e) {
       notes.push_back("joint '" + joint + "' is not defined in " + model_path + " itself (an included file?): its corrected values are not written");
       continue;
@@ -70,7 +98,7 @@ std::string write_extended_mjcf(const std::string& model_path, const MjcfEdits& 
     for (const auto& [attr, value] : attrs) e->SetAttribute(attr.c_str(), exact_text(value).c_str());
   }
   for (const auto& in : edits.inertials) {
-    XMLElement* body = find_named(root, "body", in.body);
+    XMLElement* body = find_in_worldbody(root, "body", in.body);
     if (!body) {
       notes.push_back("body '" + in.body + "' is not defined in " + model_path + " itself: its corrected inertial is not written");
       continue;
@@ -89,12 +117,19 @@ std::string write_extended_mjcf(const std::string& model_path, const MjcfEdits& 
     if (!custom) custom = root->InsertEndChild(doc.NewElement("custom"))->ToElement();
     for (const auto& [name, data] : edits.texts) {
       XMLElement* text = doc.NewElement("text");
-      text->SetAttribute("name", name.c_str());
+      text->SetAttribute("name", unique_text_name(custom, name).c_str());
       text->SetAttribute("data", data.c_str());
       custom->InsertEndChild(text);
     }
   }
-  if (!edits.comment.empty()) doc.InsertFirstChild(doc.NewComment((" " + edits.comment + " ").c_str()));
+  if (!edits.comment.empty()) {
+    // After an <?xml ...?> declaration, which must stay first.
+    auto* comment = doc.NewComment((" " + comment_text(edits.comment) + " ").c_str());
+    if (doc.FirstChild() && doc.FirstChild()->ToDeclaration())
+      doc.InsertAfterChild(doc.FirstChild(), comment);
+    else
+      doc.InsertFirstChild(comment);
+  }
   tinyxml2::XMLPrinter printer;
   doc.Print(&printer);
   return printer.CStr();

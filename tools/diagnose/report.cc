@@ -53,7 +53,7 @@ std::string report_summary(const nlohmann::json& r) {
   return s.str();
 }
 
-std::string report_markdown(const nlohmann::json& r) {
+std::string report_markdown(const nlohmann::json& r, bool with_plots) {
   std::ostringstream s;
   s << "# spml diagnose\n\n";
   s << "- model: `" << r["model"].get<std::string>() << "`\n- data: `" << r["data"].get<std::string>() << "` (fit split `"
@@ -111,7 +111,7 @@ std::string report_markdown(const nlohmann::json& r) {
     s << "\n## Notes\n\n";
     for (const auto& n : r["notes"]) s << "- " << n.get<std::string>() << "\n";
   }
-  s << "\n## Plots\n\n![residuals](plots/residuals.png)\n\n![states](plots/states.png)\n";
+  if (with_plots) s << "\n## Plots\n\n![residuals](plots/residuals.png)\n\n![states](plots/states.png)\n";
   return s.str();
 }
 

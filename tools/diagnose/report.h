@@ -7,6 +7,7 @@
 namespace spml::diagnose_detail {
 
 std::string report_summary(const nlohmann::json& report);    // a few lines for the terminal
-std::string report_markdown(const nlohmann::json& report);   // report.md
+// report.md; with_plots: link plots/residuals.png and plots/states.png
+std::string report_markdown(const nlohmann::json& report, bool with_plots = true);
 
 }  // namespace spml::diagnose_detail

@@ -4,6 +4,8 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <optional>
+#include <string>
 #include <vector>
 
 namespace spml {
@@ -27,5 +29,15 @@ bool uneven_steps(const Eigen::VectorXd& t);
 double median_step(const Eigen::VectorXd& t);
 // Linear interpolation of (t, x) at the times `at` (t increasing, at within [t0, tN]).
 Eigen::VectorXd interpolate(const Eigen::VectorXd& t, const Eigen::VectorXd& x, const Eigen::VectorXd& at);
+
+// The zero-phase low-pass a dataset went through, as recorded in its root attribute `filter`
+// ("butterworth order=4 cutoff=15 zero-phase": order of one pass, cut-off in Hz).
+struct LowpassRecord {
+  int order = 4;
+  double cutoff_hz = 0;
+};
+std::string lowpass_record_text(const LowpassRecord& f);
+// nullopt when `text` is not such a record (a reader ignores what it does not know).
+std::optional<LowpassRecord> parse_lowpass_record(const std::string& text);
 
 }  // namespace spml

@@ -19,6 +19,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <string>
 #include <vector>
@@ -44,6 +45,15 @@ struct DiagnoseOptions {
   // Other datasets (e.g. a validation record) whose every split is scored with the model as
   // given, after each cause and with the final model; they play no part in the selection.
   std::vector<std::string> cross;
+  // Ripple (a position-periodic effect) is searched only at wavenumbers whose periods the
+  // joint's stroke spans at least this many times; ripple_gear > 0 fixes the wavenumber at
+  // the drive's gear ratio instead.
+  double min_ripple_periods = 3;
+  double ripple_gear = 0;
+
+  // Throws std::invalid_argument naming the first option out of its range (every number must
+  // be finite; holdout in [0.05, 0.9], min_gain in [0, 1], ...). diagnose() calls it first.
+  void check() const;
 };
 
 // Where the time went (seconds).
@@ -61,6 +71,12 @@ struct DiagnoseResult {
 // Runs the whole diagnosis and, when out_dir is not empty, writes report.json, report.md,
 // extended.xml, series.csv and plots/ there (each file atomically). Throws std::exception with
 // a message naming the file, split, column or plugin on bad input.
-DiagnoseResult diagnose(const DiagnoseOptions& options, const std::string& out_dir);
+//
+// Outputs are staged in a private folder inside out_dir and moved into place together at the
+// end (under a lock, so two runs into one folder leave one run's files, and a stale plots/ is
+// removed); before_publish, when given, runs on the staged folder first (the CLI draws the
+// plots there). Inputs that are outputs (out_dir/extended.xml as --model) are refused.
+DiagnoseResult diagnose(const DiagnoseOptions& options, const std::string& out_dir,
+                        const std::function<void(const std::string& staged_dir)>& before_publish = {});
 
 }  // namespace spml

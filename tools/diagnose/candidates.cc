@@ -1,0 +1,151 @@
+// Stage 4a, candidates: every force plugin with a regressor, on every joint that moves, and the
+// regressor columns of one configured plugin on one split.
+#include <algorithm>
+#include <cmath>
+
+#include "diagnosis.h"
+#include "spml/parse.h"
+
+namespace spml::diagnose_detail {
+
+// The configuration a candidate is made with: its shape values, and for every other required
+// key a neutral value (0 clipped into the key's range): linear parameters do not change the
+// regressor columns, so their values do not matter here.
+void Diagnosis::find_candidates() {
+  for (const std::string& name : available_force_plugins()) {
+    const spml_force_plugin& p = load_force_plugin(name);
+    if (!p.regressor) {
+      not_tried_.push_back({{"effect", name},
+                            {"reason", std::string(p.advance ? "stateful" : "not linear in its parameters") +
+                                           ": its force is not a regressor of the measured state, so inverse dynamics cannot fit it"}});
+      continue;
+    }
+    std::vector<const spml_shape_param*> shape;
+    for (const spml_shape_param* sp = p.shape_params; sp && sp->key; ++sp) shape.push_back(sp);
+    std::vector<std::pair<std::string, std::string>> fixed;
+    std::string problem;
+    for (const spml_config_key* k = p.config_keys; k && k->name; ++k) {
+      bool is_shape = false;
+      for (auto* sp : shape) is_shape |= std::string(sp->key) == k->name;
+      if (is_shape || k->default_value) continue;
+      if (k->type == SPML_VALUE_TEXT) {
+        problem = "required text key '" + std::string(k->name) + "' has no default and no search description";
+        break;
+      }
+      const double v = std::clamp(0.0, k->min, k->max);
+      fixed.emplace_back(k->name, k->type == SPML_VALUE_INTEGER ? integer_text(v) : exact_text(v));
+    }
+    if (!problem.empty()) {
+      not_tried_.push_back({{"effect", name}, {"reason", problem}});
+      continue;
+    }
+    add_candidates(p, shape, fixed);
+  }
+}
+
+// One candidate per moving joint, with the shape ranges made absolute: position shapes span
+// the joint's stroke in the fit split, speed shapes its largest speed.
+void Diagnosis::add_candidates(const spml_force_plugin& p, const std::vector<const spml_shape_param*>& shape,
+                               const std::vector<std::pair<std::string, std::string>>& fixed) {
+  for (size_t o = 0; o < out_joint_index_.size(); ++o) {
+    const int j = out_joint_index_[o];
+    if (still_[static_cast<size_t>(j)]) continue;
+    Candidate c;
+    c.plugin = &p;
+    c.joint = j;
+    c.joint_name = out_joints_[o];
+    c.shape = shape;
+    c.fixed = fixed;
+    const auto q = fit_.split.X.col(fit_.cols->q[static_cast<size_t>(j)]);
+    const double vmax = fit_.split.X.col(fit_.cols->qd[static_cast<size_t>(j)]).cwiseAbs().maxCoeff();
+    for (auto* sp : shape) {
+      double lo = sp->lo, hi = sp->hi;
+      if (sp->domain == SPML_SHAPE_POSITION) {
+        const double a = q.minCoeff(), span = q.maxCoeff() - a;
+        lo = a + sp->lo * span;
+        hi = a + sp->hi * span;
+      } else if (sp->domain == SPML_SHAPE_SPEED) {
+        lo = sp->lo * vmax;
+        hi = sp->hi * vmax;
+      }
+      c.shape_range.emplace_back(lo, hi);
+    }
+    if (std::string(p.name) == "ripple" && !bound_wavenumber(c, q.maxCoeff() - q.minCoeff())) continue;
+    cands_.push_back(std::move(c));
+  }
+}
+
+// A position-periodic effect is told from a smooth position-dependent residual only when the
+// stroke spans several of its periods: the ripple's wavenumber (`gear`, periods per radian
+// over 2 pi) is searched from min_ripple_periods periods over the stroke upwards, or fixed
+// at the drive's gear ratio when given. False (with a note) when nothing is left to search.
+bool Diagnosis::bound_wavenumber(Candidate& c, double stroke) {
+  for (size_t k = 0; k < c.shape.size(); ++k) {
+    if (std::string(c.shape[k]->key) != "gear") continue;
+    auto& [lo, hi] = c.shape_range[k];
+    if (opt_.ripple_gear > 0) {
+      lo = hi = opt_.ripple_gear;
+      return true;
+    }
+    lo = std::max(lo, std::ceil(opt_.min_ripple_periods * 2 * M_PI / std::max(stroke, 1e-12)));
+    if (lo > hi) {
+      not_tried_.push_back({{"effect", "ripple"}, {"joint", c.joint_name},
+                            {"reason", "the stroke (" + fmt(stroke) + " rad) spans fewer than " + fmt(opt_.min_ripple_periods) +
+                                           " periods of any wavenumber the plugin allows: a ripple cannot be told from a smooth residual"}});
+      return false;
+    }
+  }
+  return true;
+}
+
+std::vector<std::pair<std::string, std::string>> Diagnosis::config_of(const Candidate& c, const std::vector<double>& shape) const {
+  auto config = c.fixed;
+  for (size_t k = 0; k < c.shape.size(); ++k)
+    config.emplace_back(c.shape[k]->key, c.shape[k]->integer ? integer_text(shape[k]) : exact_text(shape[k]));
+  return config;
+}
+
+BlockColumns Diagnosis::columns(const PluginInstance& inst, const SplitData& s) const {
+  const mjModel* m = reg_->model();
+  const int np = inst.nparam(), O = static_cast<int>(s.split.Y.cols());
+  Eigen::MatrixXd C = Eigen::MatrixXd::Zero(s.N * O, np);
+  std::vector<mjtNum> qpos(m->qpos0, m->qpos0 + m->nq), qvel(static_cast<size_t>(m->nv), 0.0),
+      R(static_cast<size_t>(m->nv) * static_cast<size_t>(np));
+  for (Eigen::Index i = 0; i < s.N; ++i) {
+    for (int j = 0; j < m->njnt; ++j) {
+      qpos[static_cast<size_t>(m->jnt_qposadr[j])] = s.split.X(i, s.cols->q[static_cast<size_t>(j)]);
+      qvel[static_cast<size_t>(m->jnt_dofadr[j])] = s.split.X(i, s.cols->qd[static_cast<size_t>(j)]);
+    }
+    std::fill(R.begin(), R.end(), 0.0);
+    inst.plugin().regressor(inst.state(), m, qpos.data(), qvel.data(), R.data());
+    // Inverse dynamics: tau = ... - force, and force = R theta.
+    for (int o = 0; o < O; ++o)
+      for (int k = 0; k < np; ++k) C(o * s.N + i, k) = -R[static_cast<size_t>(s.cols->output_dof[static_cast<size_t>(o)] * np + k)];
+  }
+  if (!C.allFinite())
+    throw PluginError("plugin '" + std::string(inst.plugin().name) + "' gave non-finite regressor values on split '" + s.name + "'");
+  filter_stacked(s.sos, C, s.N);
+  return BlockColumns::from_dense(C, s.N, O);
+}
+
+// The columns of a candidate with its chosen shape on another split (test, cross).
+BlockColumns Diagnosis::columns_of(const Candidate& c, const SplitData& s) const {
+  PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
+  return columns(inst, s);
+}
+
+std::string Diagnosis::refused(int candidate, const Eigen::VectorXd& theta) const {
+  const Candidate& c = cands_[static_cast<size_t>(candidate)];
+  try {
+    PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
+    inst.set_params(theta);
+    const std::string text = inst.config_text();
+    if (text.empty()) return "";   // cannot check; the extended model will say it is not written
+    PluginInstance again(*c.plugin, reg_->model(), {c.joint}, parse_config_words(text, "fitted"), "fitted");
+    return "";
+  } catch (const std::exception& e) {
+    return e.what();
+  }
+}
+
+}  // namespace spml::diagnose_detail

@@ -1,0 +1,176 @@
+// The state one diagnose run carries from stage to stage. Each stage lives in its own file, in
+// the order the data flows:
+//   load.cc        model, dataset, splits (fit / test / cross)
+//   prepare.cc     one split made ready: columns, base regressor, targets, the model's prediction,
+//                  the parallel filter (filtering.cc)
+//   estimate.cc    least-squares refits of the base parameters and causes, residuals on any split
+//   candidates.cc  the force plugins as candidate causes, and their regressor columns
+//   shape_search.cc  the shape of one candidate (grid, zoom, plateau middle, local polish)
+//   selection.cc   forward selection, backward elimination, the `parameters` decision
+//   verify.cc      the written model: extended.xml, its own inverse dynamics, rollouts
+//   report_json.cc report.json (causes, metrics, cross-tests) and series.csv
+#pragma once
+
+#include <Eigen/Core>
+#include <chrono>
+#include <limits>
+#include <memory>
+#include <set>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "design.h"
+#include "extended_mjcf.h"
+#include "filtering.h"
+#include "spml/diagnose.h"
+#include "spml/envs/mjcf_regressor.h"
+#include "spml/force_effects.h"
+
+namespace spml::diagnose_detail {
+
+using Clock = std::chrono::steady_clock;
+inline double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+std::string fmt(double v, int precision = 4);
+std::string integer_text(double v);
+
+// One split as diagnose uses it: its rows, the stacked base regressor, the stacked torques and
+// what the model as given predicts.
+struct SplitData {
+  std::string name;
+  Split split;
+  std::unique_ptr<JointColumns> cols;
+  BlockColumns base;
+  Eigen::VectorXd b, given, y0;   // targets, prediction of the model as given, b - given
+  Eigen::Index N = 0;
+  std::vector<Section> sos;       // the parallel filter on this split's time base (empty: none)
+};
+
+// A candidate cause: one plugin on one joint, with its shape chosen.
+struct Candidate {
+  const spml_force_plugin* plugin = nullptr;
+  int joint = -1;                 // model joint index
+  std::string joint_name;
+  std::vector<const spml_shape_param*> shape;
+  std::vector<std::pair<std::string, std::string>> fixed;   // non-shape keys it is made with
+  std::vector<double> shape_values;                         // absolute values, chosen
+  std::vector<std::pair<double, double>> shape_range;       // absolute search range
+  BlockColumns fit_cols;
+  bool searched = false;
+  bool skipped = false;           // its plugin failed (non-finite columns): not a candidate
+  Gain gain;
+  double delta_bic = -std::numeric_limits<double>::infinity();
+};
+
+struct Cause {
+  int candidate;
+  double delta_bic;
+  std::string superseded_by;
+};
+
+// The split with its torque columns in `order` (matched by name); throws naming `file` when
+// the names differ.
+Split in_column_order(const Split& s, const std::vector<std::string>& order, const std::string& file);
+
+// The subjects (joint or body names) of the terms of a base parameter's name, e.g.
+// "armature:joint1 + 0.5*Izz:link1" -> joint1, link1: exact names, so joint1 is not joint10.
+std::vector<std::string> term_subjects(const std::string& base_name);
+
+// Evidence for the larger of two nested fits (Bayesian information criterion, n equations -
+// the effective number where residuals are autocorrelated - dk more parameters): positive when
+// the drop of the residual sum of squares pays for them. Sums of squares below `floor` (the
+// rounding level of the targets) count as `floor`: exact data give no evidence from rounding.
+double delta_bic(double n, double rss_smaller, double rss_larger, double dk, double floor);
+
+// The held-out test: the residual sum of squares falls by at least the fraction min_gain
+// (sums below `floor` count as `floor`).
+bool gains_on_test(double rss_before, double rss_after, double min_gain, double floor);
+
+// The rounding level of a stacked target b: (1e-8 |b|)^2, far below any measured residual.
+inline double rss_floor(const Eigen::VectorXd& b) { return 1e-16 * b.squaredNorm(); }
+
+class Diagnosis {
+ public:
+  explicit Diagnosis(const DiagnoseOptions& o) : opt_(o) {}
+  DiagnoseResult run(const std::string& out_dir);
+
+ private:
+  // load.cc
+  void load();
+  void choose_splits(Split& fit_part, Split& test_part);
+  void load_cross();
+  void map_outputs();
+  void note_frictionloss();
+  // prepare.cc
+  SplitData prepare(const Split& s);
+  void plan_parallel_filter();
+  void apply_filter(SplitData& d) const;
+  // candidates.cc
+  void find_candidates();
+  void add_candidates(const spml_force_plugin& p, const std::vector<const spml_shape_param*>& shape,
+                      const std::vector<std::pair<std::string, std::string>>& fixed);
+  bool bound_wavenumber(Candidate& c, double stroke);
+  std::vector<std::pair<std::string, std::string>> config_of(const Candidate& c, const std::vector<double>& shape) const;
+  BlockColumns columns(const PluginInstance& inst, const SplitData& s) const;
+  BlockColumns columns_of(const Candidate& c, const SplitData& s) const;
+  // "" when the plugin accepts its fitted parameters (written back through write_config and
+  // created again), else its reason: a negative band level is not a friction band.
+  std::string refused(int candidate, const Eigen::VectorXd& theta) const;
+  // shape_search.cc
+  double search_shape(Candidate& c, const Fit& current);
+  // estimate.cc
+  std::vector<const BlockColumns*> blocks(const std::vector<int>& causes, bool base_free) const;
+  Fit refit(const std::vector<int>& causes, bool base_free, bool robust = false) const;
+  Eigen::VectorXd residual_on(const SplitData& s, const std::vector<int>& causes, bool base_free, const Fit& f) const;
+  double rss_on(const Eigen::VectorXd& r, const std::vector<int>& outputs, Eigen::Index N) const;
+  std::vector<int> outputs_of(int candidate) const;
+  // selection.cc
+  void select();
+  void score_candidates(const Fit& current, const std::vector<int>& chosen, const std::set<int>& research, std::vector<int>& order);
+  bool evidence_holds(int candidate, const Fit& smaller, const Fit& larger) const;
+  bool cause_needed(size_t i, const std::vector<size_t>& set) const;
+  void eliminate_backward();
+  void decide_parameters();
+  std::vector<int> kept_effects() const;
+  // report_json.cc
+  nlohmann::json metrics(const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test) const;
+  nlohmann::json per_joint(const Eigen::VectorXd& r, Eigen::Index N) const;
+  nlohmann::json cross_errors(const std::vector<int>& causes, bool base_free, const Fit& f) const;
+  void build_report(const std::string& out_dir);
+  nlohmann::json parameters_cause(const Fit& final_fit, MjcfEdits& edits, std::vector<std::string>& notes) const;
+  void parameter_edits(const Eigen::VectorXd& pi, MjcfEdits& edits, std::vector<std::string>& notes) const;
+  void inertial_edit(const Eigen::VectorXd& pi, const std::string& body, MjcfEdits& edits, std::vector<std::string>& notes) const;
+  nlohmann::json effect_cause(size_t i, const Fit& final_fit, bool free, MjcfEdits& edits, std::vector<std::string>& notes,
+                              nlohmann::json& cross_after) const;
+  nlohmann::json cross_report(const Fit& final_fit, bool free, const nlohmann::json& cross_after) const;
+  void write_series(const std::string& out_dir, const Eigen::VectorXd& final_pred_fit, const Eigen::VectorXd& final_test) const;
+  // verify.cc
+  std::pair<Eigen::VectorXd, Eigen::VectorXd> verify(const std::string& out_dir, MjcfEdits& edits, std::vector<std::string>& notes,
+                                                     const Eigen::VectorXd& final_pred_fit);
+  void run_rollouts(const std::string& ext_path, std::vector<std::string>& notes);
+  Eigen::VectorXd written_prediction(const MjcfRegressor& ext, const MjcfRegressor::Base& ebase, const SplitData& s) const;
+
+  DiagnoseOptions opt_;
+  DiagnoseResult result_;
+  std::unique_ptr<MjcfRegressor> reg_;
+  MjcfRegressor::Base base_;
+  Dataset ds_;
+  std::string test_name_;
+  SplitData fit_, test_;
+  std::vector<std::pair<std::string, SplitData>> cross_;   // (file, split)
+  std::vector<std::string> out_joints_;   // per output: joint name
+  std::vector<int> out_joint_index_;      // per output: model joint index
+  std::vector<bool> still_;               // per model joint
+  std::vector<Candidate> cands_;
+  nlohmann::json not_tried_ = nlohmann::json::array();
+  std::vector<Cause> causes_;
+  bool parameters_named_ = false;
+  double parameters_delta_bic_ = 0, parameters_n_eff_ = 0;
+  int parameters_contradicted_ = 0;
+  mutable bool parameters_partial_ = false;   // some re-identified inertial could not be written   // base parameters beyond 3 robust standard errors
+  std::vector<std::string> notes_;
+  FilterPlan filter_plan_;
+};
+
+}  // namespace spml::diagnose_detail

@@ -1,0 +1,93 @@
+// Part of stage 2 (prepare): which zero-phase low-pass the model's columns and the torques go
+// through (filtering.h).
+#include "filtering.h"
+
+#include <cmath>
+#include <sstream>
+
+namespace spml::diagnose_detail {
+namespace {
+
+std::string text(double v) {
+  std::ostringstream s;
+  s.precision(4);
+  s << v;
+  return s.str();
+}
+
+// Fraction of the (mean-free) power of x above cut-off fc (zero-phase order-4 Butterworth).
+double power_above(const Eigen::VectorXd& x, double fc, double rate) {
+  const Eigen::VectorXd c = x.array() - x.mean();
+  const double total = c.squaredNorm();
+  if (!(total > 0)) return 0;
+  return (c - filtfilt(butterworth_lowpass(4, fc, rate), c)).squaredNorm() / total;
+}
+
+// The band the trajectory excites: the lowest cut-off of a ladder (0.1 Hz doubling) below
+// which every joint's positions keep 99.99 % of their variance; 0 when there is none.
+double excitation_band(const std::vector<Eigen::VectorXd>& q, double rate) {
+  for (double fc = 0.1; fc < 0.1 * rate; fc *= 2) {
+    bool below = true;
+    for (const auto& x : q) below &= power_above(x, fc, rate) < 1e-4;
+    if (below) return fc;
+  }
+  return 0;
+}
+
+}  // namespace
+
+FilterPlan plan_filter(const Dataset& ds, const std::vector<Eigen::VectorXd>& q, const std::vector<Eigen::VectorXd>& qdd,
+                       double rate_hz, std::vector<std::string>& notes) {
+  FilterPlan plan;
+  const auto it = ds.provenance.find("filter");
+  if (it != ds.provenance.end()) {
+    if (const auto rec = parse_lowpass_record(it->second)) {
+      plan.source = FilterPlan::Source::recorded;
+      plan.lowpass = *rec;
+      plan.description = "the dataset records the low-pass it went through ('" + it->second +
+                         "'): every model and candidate column is filtered alike (parallel filtering); the torques already were";
+      return plan;
+    }
+    notes.push_back("the dataset's filter attribute '" + it->second + "' is not understood: no parallel filtering");
+    return plan;
+  }
+  if (!(rate_hz > 0)) return plan;
+  const double band = excitation_band(q, rate_hz);
+  if (!(band > 0)) return plan;
+  const double cutoff = 5 * band;
+  double worst = 0;
+  for (const auto& x : qdd) worst = std::max(worst, cutoff < 0.4 * rate_hz ? power_above(x, cutoff, rate_hz) : 0.0);
+  if (worst <= 0.05) return plan;
+  plan.source = FilterPlan::Source::detected;
+  plan.lowpass = {4, cutoff};
+  plan.torques = true;
+  plan.description = "the accelerations hold " + text(100 * worst) + " % of their power above " + text(cutoff) +
+                     " Hz (five times the band the positions excite, " + text(band) +
+                     " Hz) and the dataset records no filter: torques and every column go through a zero-phase Butterworth "
+                     "low-pass (order 4, " + text(cutoff) + " Hz) alike (parallel filtering)";
+  return plan;
+}
+
+std::vector<Section> plan_sections(const FilterPlan& plan, const Split& s) {
+  if (plan.source == FilterPlan::Source::none || s.t.size() != s.rows() || s.rows() < 3) return {};
+  const double dt = median_step(s.t);
+  if (!(dt > 0) || plan.lowpass.cutoff_hz >= 0.4 / dt) return {};
+  return butterworth_lowpass(plan.lowpass.order, plan.lowpass.cutoff_hz, 1.0 / dt);
+}
+
+void filter_stacked(const std::vector<Section>& sos, Eigen::MatrixXd& A, Eigen::Index N) {
+  if (sos.empty() || N < 2) return;
+  for (Eigen::Index c = 0; c < A.cols(); ++c)
+    for (Eigen::Index o = 0; o * N < A.rows(); ++o) {
+      const Eigen::VectorXd seg = A.col(c).segment(o * N, N);
+      if (seg.cwiseAbs().maxCoeff() > 0) A.col(c).segment(o * N, N) = filtfilt(sos, seg);
+    }
+}
+
+void filter_stacked(const std::vector<Section>& sos, Eigen::VectorXd& b, Eigen::Index N) {
+  Eigen::MatrixXd B = b;
+  filter_stacked(sos, B, N);
+  b = B.col(0);
+}
+
+}  // namespace spml::diagnose_detail

@@ -1,0 +1,70 @@
+// Stage 2, prepare: one split made ready for the least squares - its joint columns, the stacked
+// base regressor, the stacked torques and what the model as given predicts.
+#include "diagnosis.h"
+#include "spml/signal.h"
+
+namespace spml::diagnose_detail {
+
+SplitData Diagnosis::prepare(const Split& s) {
+  SplitData d;
+  d.name = s.name;
+  d.split = s;
+  const std::string where = opt_.data + ": ";
+  try {
+    d.cols = std::make_unique<JointColumns>(*reg_, s);
+  } catch (const DatasetError& e) {
+    std::string msg = e.what();
+    if (msg.find("qdd:") != std::string::npos) msg += " (measured data: `spml import --derive` adds qd:/qdd: by filtered differentiation)";
+    throw DatasetError(where + msg);
+  }
+  if (!s.X.allFinite() || !s.Y.allFinite()) throw DatasetError(where + "split '" + s.name + "': holds NaN or Inf values");
+  // Filters, hold-outs and rollouts run in time order.
+  for (Eigen::Index i = 1; i < s.t.size(); ++i)
+    if (!(s.t[i] > s.t[i - 1]))
+      throw DatasetError(where + "split '" + s.name + "': time stamps do not increase at row " + std::to_string(i) + " (t = " + fmt(s.t[i - 1]) +
+                         ", then " + fmt(s.t[i]) + "): sort the rows by time");
+  d.N = s.rows();
+  {
+    // The base block touches every output: kept whole.
+    const Eigen::MatrixXd A = stacked_base_regressor(*reg_, base_, s.X, *d.cols, where + "split " + s.name);
+    d.base.rows_per_output = d.N;
+    d.base.outputs = static_cast<int>(s.Y.cols());
+    d.base.cols = static_cast<int>(A.cols());
+    for (int o = 0; o < d.base.outputs; ++o) {
+      d.base.active.push_back(o);
+      d.base.parts.emplace_back(A.middleRows(o * d.N, d.N));
+    }
+  }
+  d.b = stacked_targets(s.Y);
+  d.given = d.base.times(base_.model_values);
+  d.y0 = d.b - d.given;
+  apply_filter(d);
+  return d;
+}
+
+// Decided on the fit split (prepared unfiltered), then applied to it; later splits are
+// filtered as they are prepared.
+void Diagnosis::plan_parallel_filter() {
+  std::vector<Eigen::VectorXd> q, qdd;
+  for (int j : out_joint_index_) {
+    q.push_back(fit_.split.X.col(fit_.cols->q[static_cast<size_t>(j)]));
+    qdd.push_back(fit_.split.X.col(fit_.cols->qdd[static_cast<size_t>(j)]));
+  }
+  const double dt = fit_.split.t.size() == fit_.split.rows() ? median_step(fit_.split.t) : 0;
+  filter_plan_ = plan_filter(ds_, q, qdd, dt > 0 ? 1 / dt : 0, notes_);
+  apply_filter(fit_);
+  if (filter_plan_.source != FilterPlan::Source::none && fit_.sos.empty())
+    filter_plan_.description += "; not applied: the cut-off (" + fmt(filter_plan_.lowpass.cutoff_hz) +
+                                " Hz) is not below 0.4 of the sampling rate of the split, so nothing is left to filter";
+}
+
+void Diagnosis::apply_filter(SplitData& d) const {
+  d.sos = plan_sections(filter_plan_, d.split);
+  if (d.sos.empty()) return;
+  for (auto& part : d.base.parts) filter_stacked(d.sos, part, d.N);
+  if (filter_plan_.torques) filter_stacked(d.sos, d.b, d.N);
+  d.given = d.base.times(base_.model_values);
+  d.y0 = d.b - d.given;
+}
+
+}  // namespace spml::diagnose_detail

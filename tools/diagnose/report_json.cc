@@ -1,0 +1,325 @@
+// Stage 7, report: report.json (the causes with their parameters and after-metrics, the final
+// errors, cross-tests) and series.csv for the plots. The edits for extended.xml are collected
+// on the way, from the same numbers the report shows.
+#include <Eigen/Dense>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <sstream>
+
+#include "diagnosis.h"
+#include "spml/matrix_file.h"
+
+namespace spml::diagnose_detail {
+namespace {
+
+// Standard MJCF quantities from the base parameters: beta = pi[independent] + Kd pi[dependent],
+// so a change of beta is carried by the independent parameter of each group.
+Eigen::VectorXd standard_from_base(const MjcfRegressor& reg, const MjcfRegressor::Base& base, const Eigen::VectorXd& delta) {
+  Eigen::VectorXd pi = reg.model_params();
+  for (int i = 0; i < base.rank; ++i) pi[base.independent[static_cast<size_t>(i)]] += delta[i];
+  return pi;
+}
+
+// The after-metrics of a cause, copied from metrics() under the report's names.
+void put_after(nlohmann::json& j, const nlohmann::json& after) {
+  j["rmse_test_after"] = after["rmse_test"];
+  j["rel_error_test_after"] = after["rel_error_test"];
+  j["rel_error_fit_after"] = after["rel_error_fit"];
+  j["rel_error_test_after_all"] = after["rel_error_test_all"];
+  j["rel_error_fit_after_all"] = after["rel_error_fit_all"];
+}
+
+}  // namespace
+
+std::vector<std::string> term_subjects(const std::string& name) {
+  std::vector<std::string> out;
+  size_t start = 0;
+  for (;;) {
+    size_t end = std::string::npos;
+    for (const char* sep : {" + ", " - "}) end = std::min(end, name.find(sep, start));
+    const std::string term = name.substr(start, end == std::string::npos ? std::string::npos : end - start);
+    const auto colon = term.find(':');
+    if (colon != std::string::npos) out.push_back(term.substr(colon + 1));
+    if (end == std::string::npos) break;
+    start = end + 3;
+  }
+  return out;
+}
+
+nlohmann::json Diagnosis::per_joint(const Eigen::VectorXd& r, Eigen::Index N) const {
+  nlohmann::json j = nlohmann::json::object();
+  for (size_t o = 0; o < out_joints_.size(); ++o)
+    j[out_joints_[o]] = std::sqrt(r.segment(static_cast<Eigen::Index>(o) * N, N).squaredNorm() / static_cast<double>(N));
+  return j;
+}
+
+nlohmann::json Diagnosis::metrics(const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test) const {
+  auto rel = [&](const Eigen::VectorXd& r, const SplitData& s) {
+    nlohmann::json j = nlohmann::json::object();
+    for (size_t o = 0; o < out_joints_.size(); ++o) {
+      const auto seg = static_cast<Eigen::Index>(o) * s.N;
+      const double denom = s.b.segment(seg, s.N).norm();
+      j[out_joints_[o]] = denom > 0 ? r.segment(seg, s.N).norm() / denom : std::numeric_limits<double>::infinity();
+    }
+    return j;
+  };
+  return {{"rmse_fit", per_joint(r_fit, fit_.N)}, {"rmse_test", per_joint(r_test, test_.N)},
+          {"rel_error_fit", rel(r_fit, fit_)}, {"rel_error_test", rel(r_test, test_)},
+          {"rel_error_fit_all", r_fit.norm() / fit_.b.norm()}, {"rel_error_test_all", r_test.norm() / test_.b.norm()}};
+}
+
+// Relative error (all joints) of a fit on every cross split.
+nlohmann::json Diagnosis::cross_errors(const std::vector<int>& causes, bool base_free, const Fit& f) const {
+  nlohmann::json out = nlohmann::json::array();
+  for (const auto& [file, s] : cross_) out.push_back(residual_on(s, causes, base_free, f).norm() / s.b.norm());
+  return out;
+}
+
+// The `parameters` cause: the base parameters beyond three standard errors of the MJCF's
+// values, and the MJCF edits that carry them.
+nlohmann::json Diagnosis::parameters_cause(const Fit& final_fit, MjcfEdits& edits, std::vector<std::string>& notes) const {
+  const Fit pf = refit({}, true);
+  nlohmann::json params = nlohmann::json::object(), se = nlohmann::json::object(), prior = nlohmann::json::object();
+  nlohmann::json undetermined = nlohmann::json::array();
+  std::set<std::string> joints;
+  for (int i = 0; i < base_.rank; ++i) {
+    const double d = final_fit.coef[i], e = final_fit.stderr_[i];
+    const std::string& name = base_.names[static_cast<size_t>(i)];
+    if (!final_fit.determined[static_cast<size_t>(i)]) {
+      undetermined.push_back(name);
+      continue;
+    }
+    // Contradicted: the estimate lies beyond three standard errors of the MJCF's value.
+    if (std::fabs(d) <= 3 * e) continue;
+    params[name] = base_.model_values[i] + d;
+    se[name] = e;
+    prior[name] = base_.model_values[i];
+    for (const auto& what : term_subjects(name))
+      if (std::find(reg_->joint_names().begin(), reg_->joint_names().end(), what) != reg_->joint_names().end()) joints.insert(what);
+  }
+  const nlohmann::json after = metrics(pf.residual, residual_on(test_, {}, true, pf));
+  nlohmann::json j{{"effect", "parameters"}, {"joints", joints.empty() ? nlohmann::json(out_joints_) : nlohmann::json(joints)},
+                   {"params", params}, {"stderr", se}, {"prior", prior}, {"not_identifiable", undetermined},
+                   {"delta_bic", parameters_delta_bic_}};
+  put_after(j, after);
+  parameter_edits(standard_from_base(*reg_, base_, final_fit.coef.head(base_.rank)), edits, notes);
+  return j;
+}
+
+// The corrected MJCF quantities: joint attributes directly, body inertials when consistent.
+void Diagnosis::parameter_edits(const Eigen::VectorXd& pi, MjcfEdits& edits, std::vector<std::string>& notes) const {
+  const Eigen::VectorXd& pi0 = reg_->model_params();
+  const auto& names = reg_->param_names();
+  std::set<std::string> bodies;
+  for (size_t k = 0; k < names.size(); ++k) {
+    if (pi[static_cast<Eigen::Index>(k)] == pi0[static_cast<Eigen::Index>(k)]) continue;
+    const std::string& nm = names[k];
+    const auto colon = nm.find(':');
+    const std::string kind = nm.substr(0, colon), what = nm.substr(colon + 1);
+    if (kind == "armature" || kind == "damping" || kind == "stiffness" || kind == "coulomb") {
+      if (mj_name2id(reg_->model(), mjOBJ_JOINT, what.c_str()) >= 0) {
+        // MuJoCo needs these >= 0 (a negative armature makes the mass matrix singular, a
+        // negative damping feeds energy in): an estimate below 0 is written as 0, and said.
+        double v = pi[static_cast<Eigen::Index>(k)];
+        if (v < 0 && kind != "stiffness") {
+          notes.push_back(nm + " is estimated at " + fmt(v) + " (< 0, not physical): written as 0");
+          v = 0;
+        }
+        edits.joint_attributes[what][kind == "coulomb" ? "frictionloss" : kind] = v;
+      } else
+        notes.push_back(nm + " changed but is a tendon quantity: not written");
+    } else if (kind == "plugin") {
+      notes.push_back(nm + " (a force plugin of the model) changed: not written, edit its declaration by hand");
+    } else {
+      bodies.insert(what);
+    }
+  }
+  for (const auto& body : bodies) inertial_edit(pi, body, edits, notes);
+}
+
+void Diagnosis::inertial_edit(const Eigen::VectorXd& pi, const std::string& body, MjcfEdits& edits, std::vector<std::string>& notes) const {
+  const auto& names = reg_->param_names();
+  auto at = [&](const std::string& k) {
+    const auto it = std::find(names.begin(), names.end(), k + ":" + body);
+    return pi[it - names.begin()];
+  };
+  const double mass = at("m");
+  Eigen::Vector3d h(at("mx"), at("my"), at("mz"));
+  Eigen::Matrix3d I;
+  I << at("Ixx"), at("Ixy"), at("Ixz"), at("Ixy"), at("Iyy"), at("Iyz"), at("Ixz"), at("Iyz"), at("Izz");
+  std::string why;
+  MjcfEdits::Inertial in;
+  in.body = body;
+  if (!(mass > 0)) {
+    why = "mass " + fmt(mass);
+  } else {
+    const Eigen::Vector3d c = h / mass;
+    const Eigen::Matrix3d Ic = I - mass * (c.squaredNorm() * Eigen::Matrix3d::Identity() - c * c.transpose());
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(Ic);
+    const auto& l = eig.eigenvalues();
+    if (!(l.minCoeff() > 0) || l[0] + l[1] < l[2]) why = "principal moments " + fmt(l[0]) + ", " + fmt(l[1]) + ", " + fmt(l[2]);
+    in.mass = mass;
+    for (int k = 0; k < 3; ++k) in.pos[k] = c[k];
+    const double full[6] = {Ic(0, 0), Ic(1, 1), Ic(2, 2), Ic(0, 1), Ic(0, 2), Ic(1, 2)};
+    std::copy(full, full + 6, in.fullinertia);
+  }
+  if (why.empty())
+    edits.inertials.push_back(in);
+  else {
+    parameters_partial_ = true;
+    notes.push_back("body '" + body + "': the re-identified inertial parameters are not physically consistent (" + why +
+                    "), so its inertial is not written; the extended model keeps the MJCF's");
+  }
+}
+
+// Effect cause i, in the order chosen, with its after-metrics along the path (causes superseded
+// by then left out); a kept cause's declaration goes into the edits.
+nlohmann::json Diagnosis::effect_cause(size_t i, const Fit& final_fit, bool free, MjcfEdits& edits, std::vector<std::string>& notes,
+                                       nlohmann::json& cross_after) const {
+  const Cause& cause = causes_[i];
+  const Candidate& c = cands_[static_cast<size_t>(cause.candidate)];
+  std::vector<int> path;
+  for (size_t k = 0; k <= i; ++k) {
+    bool gone = false;
+    for (size_t l = k + 1; l <= i; ++l)
+      gone |= !causes_[k].superseded_by.empty() && cands_[static_cast<size_t>(causes_[l].candidate)].plugin->name == causes_[k].superseded_by &&
+              cands_[static_cast<size_t>(causes_[l].candidate)].joint == c.joint;
+    if (!gone) path.push_back(causes_[k].candidate);
+  }
+  const Fit pf = refit(path, free);
+  const nlohmann::json after = metrics(pf.residual, residual_on(test_, path, free, pf));
+  cross_after.push_back(cross_errors(path, free, pf));
+  // Parameter values: the final fit's for causes kept, the path's for superseded ones.
+  const bool kept = cause.superseded_by.empty();
+  const Fit& src = kept ? final_fit : pf;
+  const std::vector<int> order = kept ? kept_effects() : path;
+  Eigen::Index off = free ? base_.rank : 0;
+  for (int k : order) {
+    if (k == cause.candidate) break;
+    off += cands_[static_cast<size_t>(k)].fit_cols.cols;
+  }
+  PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
+  const auto pnames = inst.param_names();
+  nlohmann::json params = nlohmann::json::object(), se = nlohmann::json::object(), shape = nlohmann::json::object();
+  Eigen::VectorXd theta(inst.nparam());
+  for (int k = 0; k < inst.nparam(); ++k) {
+    theta[k] = src.determined[static_cast<size_t>(off + k)] ? src.coef[off + k] : 0.0;
+    params[pnames[static_cast<size_t>(k)]] = theta[k];
+    se[pnames[static_cast<size_t>(k)]] = src.stderr_[off + k];
+  }
+  for (size_t k = 0; k < c.shape.size(); ++k) shape[c.shape[k]->key] = c.shape_values[k];
+  inst.set_params(theta);
+  const std::string config = inst.config_text();
+  nlohmann::json j{{"effect", c.plugin->name}, {"joints", {c.joint_name}}, {"params", params}, {"stderr", se}, {"shape", shape},
+                   {"delta_bic", cause.delta_bic}};
+  put_after(j, after);
+  if (!kept) j["superseded_by"] = cause.superseded_by;
+  if (kept) {
+    const std::string name = "spml.plugin.diagnosed_" + std::string(c.plugin->name) + "_" + c.joint_name;
+    if (config.empty())
+      notes.push_back(std::string("plugin '") + c.plugin->name + "' cannot write its configuration (no write_config): " + name + " is not in the extended model");
+    else if (c.joint_name.find_first_of(" \t\n\r,") != std::string::npos)
+      notes.push_back("joint '" + c.joint_name + "' has a space or comma in its name, which a plugin declaration (joints=a,b) cannot hold: " +
+                      c.plugin->name + " on it is not in the extended model");
+    else {
+      edits.texts.emplace_back(name, "type=" + std::string(c.plugin->name) + " joints=" + c.joint_name + " " + config);
+      j["declaration"] = edits.texts.back().second;
+    }
+  }
+  return j;
+}
+
+nlohmann::json Diagnosis::cross_report(const Fit& final_fit, bool free, const nlohmann::json& cross_after) const {
+  nlohmann::json cross = nlohmann::json::array();
+  const nlohmann::json fin = cross_errors(kept_effects(), free, final_fit);
+  for (size_t k = 0; k < cross_.size(); ++k) {
+    const SplitData& s = cross_[k].second;
+    nlohmann::json after = nlohmann::json::array();
+    for (const auto& step : cross_after) after.push_back(step[k]);
+    cross.push_back({{"data", cross_[k].first}, {"split", s.name}, {"rows", s.N},
+                     {"rel_error_given", s.y0.norm() / s.b.norm()}, {"rel_error_after_each_cause", after},
+                     {"rel_error_final", fin[k]}});
+  }
+  return cross;
+}
+
+void Diagnosis::build_report(const std::string& out_dir) {
+  auto t0 = Clock::now();
+  nlohmann::json& R = result_.report;
+  R["format"] = "spml-diagnose/2";
+  R["model"] = opt_.model;
+  R["data"] = opt_.data;
+  R["fit_split"] = opt_.fit_split;
+  R["test_split"] = test_name_;
+  R["joints"] = out_joints_;
+  R["rows"] = {{"fit", fit_.N}, {"test", test_.N}};
+  R["settings"] = {{"bic_threshold", opt_.bic_threshold}, {"min_gain", opt_.min_gain}, {"max_causes", opt_.max_causes},
+                   {"still_speed", opt_.still_speed}, {"candidates", cands_.size()}};
+  R["baseline"] = metrics(fit_.y0, test_.y0);
+  R["parallel_filter"] = {{"source", filter_plan_.source == FilterPlan::Source::recorded   ? "recorded"
+                                     : filter_plan_.source == FilterPlan::Source::detected ? "detected"
+                                                                                           : "none"},
+                          {"applied", !fit_.sos.empty()}, {"torques_filtered", !fit_.sos.empty() && filter_plan_.torques},
+                          {"order", filter_plan_.lowpass.order}, {"cutoff_hz", filter_plan_.lowpass.cutoff_hz},
+                          {"why", filter_plan_.description}};
+  R["statistics"] = {{"standard_errors", "autocorrelation-robust (batch means, Andrews bandwidth)"},
+                     {"equations", fit_.y0.size()}, {"parameters_n_eff", parameters_n_eff_},
+                     {"parameters_delta_bic", parameters_delta_bic_}, {"parameters_contradicted", parameters_contradicted_}};
+  const bool free = parameters_named_;
+  const Fit final_fit = refit(kept_effects(), free, true);
+  const Eigen::VectorXd final_test = residual_on(test_, kept_effects(), free, final_fit);
+  nlohmann::json causes = nlohmann::json::array(), cross_after = nlohmann::json::array();
+  MjcfEdits edits;
+  std::vector<std::string> notes = notes_;
+  if (free) {
+    causes.push_back(parameters_cause(final_fit, edits, notes));
+    cross_after.push_back(cross_errors({}, true, refit({}, true)));
+  }
+  for (size_t i = 0; i < causes_.size(); ++i) causes.push_back(effect_cause(i, final_fit, free, edits, notes, cross_after));
+  R["causes"] = causes;
+  // The fit's own prediction; `final` is set by verify() from the written model itself.
+  R["final_internal"] = metrics(final_fit.residual, final_test);
+  if (!cross_.empty()) R["cross"] = cross_report(final_fit, free, cross_after);
+  nlohmann::json still = nlohmann::json::array();
+  for (size_t j = 0; j < still_.size(); ++j)
+    if (still_[j])
+      still.push_back({{"joint", reg_->joint_names()[j]},
+                       {"reason", "does not move in the fit split (|qd| <= " + fmt(opt_.still_speed) + "): its friction and inertia are not identifiable; no cause is tried on it"}});
+  R["not_identifiable"] = still;
+  R["not_tried"] = not_tried_;
+  result_.timings.outputs += since(t0);
+  const auto written = verify(out_dir, edits, notes, fit_.b - final_fit.residual);
+  R["notes"] = notes;
+  t0 = Clock::now();
+  write_series(out_dir, written.first, written.second);
+  result_.timings.outputs += since(t0);
+}
+
+// Per-sample series for the plots: both splits, measured and predicted torques.
+void Diagnosis::write_series(const std::string& out_dir, const Eigen::VectorXd& final_pred_fit, const Eigen::VectorXd& final_pred_test) const {
+  if (out_dir.empty()) return;
+  std::ostringstream csv;
+  csv.precision(10);
+  csv << "split,t";
+  for (const auto& j : out_joints_) csv << ",q:" << j << ",qd:" << j << ",tau:" << j << ",given:" << j << ",final:" << j;
+  csv << "\n";
+  auto rows = [&](const SplitData& s, const Eigen::VectorXd& final_pred) {
+    for (Eigen::Index i = 0; i < s.N; ++i) {
+      csv << (&s == &fit_ ? "fit" : "test") << "," << (s.split.t.size() ? s.split.t[i] : static_cast<double>(i));
+      for (size_t o = 0; o < out_joints_.size(); ++o) {
+        const auto j = static_cast<size_t>(out_joint_index_[o]);
+        const Eigen::Index r = static_cast<Eigen::Index>(o) * s.N + i;
+        csv << "," << s.split.X(i, s.cols->q[j]) << "," << s.split.X(i, s.cols->qd[j]) << "," << s.b[r] << "," << s.given[r] << ","
+            << final_pred[r];
+      }
+      csv << "\n";
+    }
+  };
+  rows(fit_, final_pred_fit);
+  rows(test_, final_pred_test);
+  write_text_atomic((std::filesystem::path(out_dir) / "series.csv").string(), csv.str());
+}
+
+}  // namespace spml::diagnose_detail

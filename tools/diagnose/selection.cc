@@ -1,0 +1,186 @@
+// Stage 5, selection: which candidates become causes. Forward selection with the base
+// parameters refitted jointly, backward elimination of causes a later one made redundant, and
+// the decision whether the MJCF's own parameters are contradicted (`parameters`).
+#include <algorithm>
+#include <cmath>
+
+#include "diagnosis.h"
+#include "statistics.h"
+
+namespace spml::diagnose_detail {
+
+double delta_bic(double n, double rss_smaller, double rss_larger, double dk, double floor) {
+  floor = std::max(floor, 1e-300);
+  return n * std::log(std::max(rss_smaller, floor) / std::max(rss_larger, floor)) - dk * std::log(n);
+}
+
+bool gains_on_test(double rss_before, double rss_after, double min_gain, double floor) {
+  rss_before = std::max(rss_before, floor);
+  rss_after = std::max(rss_after, floor);
+  return rss_before > 0 && (rss_before - rss_after) / rss_before >= min_gain;
+}
+
+std::vector<int> Diagnosis::kept_effects() const {
+  std::vector<int> out;
+  for (const auto& c : causes_)
+    if (c.superseded_by.empty()) out.push_back(c.candidate);
+  return out;
+}
+
+// Searches (or re-scores) every candidate not chosen against the current fit; `order` gets
+// those whose evidence passes the threshold, most evidence per added parameter first: of
+// nested explanations the smaller one (Coulomb before asymmetric friction, before a band that
+// spans the whole stroke) gets its turn, the larger follows if it adds.
+void Diagnosis::score_candidates(const Fit& current, const std::vector<int>& chosen, const std::set<int>& research, std::vector<int>& order) {
+  const double n = static_cast<double>(fit_.y0.size());
+  for (size_t k = 0; k < cands_.size(); ++k) {
+    if (std::find(chosen.begin(), chosen.end(), static_cast<int>(k)) != chosen.end()) continue;
+    Candidate& c = cands_[k];
+    if (c.skipped) continue;
+    try {
+      if (!c.searched || (!c.shape.empty() && research.count(c.joint)))
+        search_shape(c, current);
+      else
+        c.gain = gain_of(c.fit_cols, current.Q, current.residual);
+    } catch (const PluginError& e) {
+      // One bad plugin (non-finite regressor values) must not stop the diagnosis.
+      c.skipped = true;
+      not_tried_.push_back({{"effect", c.plugin->name}, {"joint", c.joint_name}, {"reason", std::string("skipped: ") + e.what()}});
+      continue;
+    }
+    if (c.gain.rank == 0 || c.gain.rss_drop <= 0) continue;
+    const double dk = c.gain.rank + static_cast<double>(c.shape.size());
+    c.delta_bic = delta_bic(n, current.rss, current.rss - c.gain.rss_drop, dk, rss_floor(fit_.b));
+    if (c.delta_bic > opt_.bic_threshold) order.push_back(static_cast<int>(k));
+  }
+  std::sort(order.begin(), order.end(), [&](int a, int b) {
+    const auto &ca = cands_[static_cast<size_t>(a)], &cb = cands_[static_cast<size_t>(b)];
+    return ca.delta_bic / (ca.gain.rank + static_cast<double>(ca.shape.size())) >
+           cb.delta_bic / (cb.gain.rank + static_cast<double>(cb.shape.size()));
+  });
+}
+
+// Forward: at each step the first of the best six candidates whose fitted parameters the
+// plugin accepts and which gains on the test split joins.
+void Diagnosis::select() {
+  std::vector<int> chosen;
+  std::set<int> research;   // joints whose candidates need a new shape search
+  for (size_t j = 0; j < still_.size(); ++j) research.insert(static_cast<int>(j));
+  auto t0 = Clock::now();
+  Fit current = refit(chosen, true);
+  Eigen::VectorXd r_test = residual_on(test_, chosen, true, current);
+  result_.timings.refits += since(t0);
+  while (static_cast<int>(chosen.size()) < opt_.max_causes) {
+    t0 = Clock::now();
+    std::vector<int> order;
+    score_candidates(current, chosen, research, order);
+    result_.timings.search += since(t0);
+    t0 = Clock::now();
+    int accepted = -1;
+    Fit next;
+    Eigen::VectorXd next_test;
+    for (size_t i = 0; i < order.size() && i < 6 && accepted < 0; ++i) {
+      std::vector<int> trial = chosen;
+      trial.push_back(order[i]);
+      Fit f = refit(trial, true);
+      Eigen::Index off = f.coef.size() - cands_[static_cast<size_t>(order[i])].fit_cols.cols;
+      if (!refused(order[i], f.coef.tail(f.coef.size() - off)).empty()) continue;
+      if (!evidence_holds(order[i], current, f)) continue;
+      Eigen::VectorXd rt = residual_on(test_, trial, true, f);
+      const auto outs = outputs_of(order[i]);
+      if (gains_on_test(rss_on(r_test, outs, test_.N), rss_on(rt, outs, test_.N), opt_.min_gain, rss_floor(test_.b))) {
+        accepted = order[i];
+        next = std::move(f);
+        next_test = std::move(rt);
+      }
+    }
+    result_.timings.refits += since(t0);
+    if (accepted < 0) break;
+    chosen.push_back(accepted);
+    causes_.push_back({accepted, cands_[static_cast<size_t>(accepted)].delta_bic, ""});
+    current = std::move(next);
+    r_test = std::move(next_test);
+    research = {cands_[static_cast<size_t>(accepted)].joint};
+  }
+  t0 = Clock::now();
+  eliminate_backward();
+  result_.timings.refits += since(t0);
+}
+
+// The candidate's evidence again, with the effective sample size of the larger fit's residuals
+// (statistics.h): the ranking used every row as independent, which filtered or autocorrelated
+// residuals are not.
+bool Diagnosis::evidence_holds(int candidate, const Fit& smaller, const Fit& larger) const {
+  const Candidate& c = cands_[static_cast<size_t>(candidate)];
+  const double n_eff = static_cast<double>(fit_.y0.size()) * effective_fraction(larger.residual, fit_.N);
+  const double dk = larger.rank - smaller.rank + static_cast<double>(c.shape.size());
+  return delta_bic(n_eff, smaller.rss, larger.rss, dk, rss_floor(fit_.b)) > opt_.bic_threshold;
+}
+
+// Is cause i still needed among the causes `set` (indices into causes_, i's included)?
+bool Diagnosis::cause_needed(size_t i, const std::vector<size_t>& set) const {
+  const double n = static_cast<double>(fit_.y0.size());
+  std::vector<int> with, without;
+  for (size_t k : set) {
+    with.push_back(causes_[k].candidate);
+    if (k != i) without.push_back(causes_[k].candidate);
+  }
+  const Fit fw = refit(with, true), fo = refit(without, true);
+  const double dk = fw.rank - fo.rank + static_cast<double>(cands_[static_cast<size_t>(causes_[i].candidate)].shape.size());
+  const auto outs = outputs_of(causes_[i].candidate);
+  // Evidence with the effective sample size of the larger fit's residuals (statistics.h).
+  const double n_eff = n * effective_fraction(fw.residual, fit_.N);
+  return delta_bic(n_eff, fo.rss, fw.rss, dk, rss_floor(fit_.b)) > opt_.bic_threshold &&
+         gains_on_test(rss_on(residual_on(test_, without, true, fo), outs, test_.N),
+                       rss_on(residual_on(test_, with, true, fw), outs, test_.N), opt_.min_gain, rss_floor(test_.b));
+}
+
+// Backward elimination: a cause that a later one made redundant (its removal costs less
+// evidence than the threshold, or less than min_gain on the test split) is superseded.
+void Diagnosis::eliminate_backward() {
+  auto live = [&](size_t upto) {
+    std::vector<size_t> set;
+    for (size_t k = 0; k <= upto && k < causes_.size(); ++k)
+      if (causes_[k].superseded_by.empty()) set.push_back(k);
+    return set;
+  };
+  for (bool changed = true; changed;) {
+    changed = false;
+    for (size_t i = 0; i < causes_.size() && !changed; ++i) {
+      if (!causes_[i].superseded_by.empty() || cause_needed(i, live(causes_.size()))) continue;
+      // Superseded by the first later cause with which it is no longer needed.
+      std::string by = "redundant";
+      const int joint = cands_[static_cast<size_t>(causes_[i].candidate)].joint;
+      for (size_t k = i + 1; k < causes_.size(); ++k)
+        if (causes_[k].superseded_by.empty() && cands_[static_cast<size_t>(causes_[k].candidate)].joint == joint && !cause_needed(i, live(k))) {
+          by = cands_[static_cast<size_t>(causes_[k].candidate)].plugin->name;
+          break;
+        }
+      causes_[i].superseded_by = by;
+      changed = true;
+    }
+  }
+}
+
+// `parameters`: the evidence (effective sample size of the free fit's residuals) and the test
+// gain must pass, and at least one base parameter must lie beyond three autocorrelation-robust
+// standard errors of the MJCF's value.
+void Diagnosis::decide_parameters() {
+  const std::vector<int> effects = kept_effects();
+  const Fit free = refit(effects, true, true), fixed = refit(effects, false);
+  const double n = static_cast<double>(fit_.y0.size());
+  parameters_n_eff_ = n * effective_fraction(free.residual, fit_.N);
+  parameters_delta_bic_ = delta_bic(parameters_n_eff_, fixed.rss, free.rss, free.rank - fixed.rank, rss_floor(fit_.b));
+  parameters_contradicted_ = 0;
+  for (int i = 0; i < base_.rank; ++i)
+    parameters_contradicted_ += free.determined[static_cast<size_t>(i)] && std::fabs(free.coef[i]) > 3 * free.stderr_[i];
+  const bool evidence = parameters_delta_bic_ > opt_.bic_threshold &&
+                        gains_on_test(residual_on(test_, effects, false, fixed).squaredNorm(),
+                                      residual_on(test_, effects, true, free).squaredNorm(), opt_.min_gain, rss_floor(test_.b));
+  parameters_named_ = evidence && parameters_contradicted_ > 0;
+  if (evidence && !parameters_named_)
+    notes_.push_back("refitting the base parameters passes the evidence and test thresholds, but none lies beyond three "
+                     "autocorrelation-robust standard errors of the MJCF's value: `parameters` is not named");
+}
+
+}  // namespace spml::diagnose_detail
