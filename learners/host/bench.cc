@@ -24,12 +24,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string fmt(double v) {
-  std::ostringstream s;
-  s << std::setprecision(6) << v;
-  return s.str();
-}
-
 // ---- 64-bit FNV-1a over everything a unit depends on ----
 class Hasher {
  public:
@@ -340,7 +334,7 @@ MatrixFile fit_unit(Learner& learner, const std::vector<Part>& parts, const Lear
     if (pred.var.size()) unit.matrices[parts[pi].name + "/var"] = pred.var;
     const Scores sc = score(parts[pi].Y, pred);
     line << " " << parts[pi].name << " RMSE";
-    for (double r : sc.rmse) line << " " << fmt(r);
+    for (double r : sc.rmse) line << " " << number_text(r);
   }
   const auto t2 = std::chrono::steady_clock::now();
   const Eigen::VectorXd coef = learner.coefficients();
@@ -348,8 +342,8 @@ MatrixFile fit_unit(Learner& learner, const std::vector<Part>& parts, const Lear
   unit.attributes["key"] = key;
   unit.attributes["learner"] = learner.name();
   unit.attributes["notes"] = learner.notes();
-  unit.attributes["fit_seconds"] = fmt(std::chrono::duration<double>(t1 - t0).count());
-  unit.attributes["predict_seconds"] = fmt(std::chrono::duration<double>(t2 - t1).count());
+  unit.attributes["fit_seconds"] = number_text(std::chrono::duration<double>(t1 - t0).count());
+  unit.attributes["predict_seconds"] = number_text(std::chrono::duration<double>(t2 - t1).count());
   fs::create_directories(fs::path(path).parent_path());
   write_matrix_file(path, unit);
   *summary = unit.attributes["fit_seconds"] + " s;" + line.str();
@@ -397,13 +391,23 @@ void aggregate(const std::string& scenario, const std::string& name, bool determ
 
 }  // namespace
 
+void BenchOptions::check() const {
+  if (data.empty()) throw LearnerError("--data: no dataset given");
+  if (out.empty()) throw LearnerError("--out: no output folder given");
+  if (reps < 1 || reps > 1000) throw LearnerError("--reps " + std::to_string(reps) + ": must be 1 ... 1000");
+  if (shards < 1 || shard < 1 || shard > shards)
+    throw LearnerError("--shard " + std::to_string(shard) + "/" + std::to_string(shards) + ": expected K/N with 1 <= K <= N");
+  if (train_max < 0) throw LearnerError("--train-max " + std::to_string(train_max) + ": must be a whole number >= 1 or all (0)");
+  if (test_max < 0) throw LearnerError("--test-max " + std::to_string(test_max) + ": must be a whole number >= 1 or all (0)");
+  for (const auto& [k, v] : config.values)
+    if (k.empty()) throw LearnerError("--set =" + v + ": expected key=value");
+}
+
 BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bool all_requested) {
   auto log = [&](const std::string& s) {
     if (o.log) o.log(s);
   };
-  if (o.reps < 1) throw LearnerError("--reps must be >= 1");
-  if (o.shards < 1 || o.shard < 1 || o.shard > o.shards)
-    throw LearnerError("--shard " + std::to_string(o.shard) + "/" + std::to_string(o.shards) + ": expected K/N with 1 <= K <= N");
+  o.check();
   const Dataset ds = read_dataset(o.data);
   const Split& train_split = ds.get("train");
   std::unique_ptr<ParametricModel> model;

@@ -16,13 +16,6 @@ constexpr const char* kColumns[] = {"scenario", "split",   "output",  "algo",   
                                     "rmsemin",  "rmsemax", "nllhmean", "nllhstd", "nllhmin",  "nllhmax",
                                     "fits",     "fitsec",  "warnings"};
 
-std::string fmt(double v) {
-  if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
-  std::ostringstream s;
-  s << std::setprecision(6) << v;
-  return s.str();
-}
-
 // A text field of results.csv: one line (newlines become spaces), in double quotes when it
 // holds a comma or a quote (RFC 4180: a quote inside is doubled), so that a data file or split
 // called "a,b" stays one field for compare, plot and any CSV reader.
@@ -99,10 +92,10 @@ std::string results_line(const ResultRow& r) {
   for (char& c : warnings)
     if (c == ',') c = ';';
   std::ostringstream s;
-  s << field(r.scenario) << "," << field(r.split) << "," << r.output << "," << field(r.algo) << "," << fmt(r.rmse_mean) << ","
-    << fmt(r.rmse_std) << "," << fmt(r.rmse_min) << "," << fmt(r.rmse_max) << "," << fmt(r.nllh_mean) << ","
-    << fmt(r.nllh_std) << "," << fmt(r.nllh_min) << "," << fmt(r.nllh_max) << "," << r.fits << ","
-    << fmt(r.fit_seconds) << "," << field(warnings);
+  s << field(r.scenario) << "," << field(r.split) << "," << r.output << "," << field(r.algo) << "," << number_text(r.rmse_mean) << ","
+    << number_text(r.rmse_std) << "," << number_text(r.rmse_min) << "," << number_text(r.rmse_max) << "," << number_text(r.nllh_mean) << ","
+    << number_text(r.nllh_std) << "," << number_text(r.nllh_min) << "," << number_text(r.nllh_max) << "," << r.fits << ","
+    << number_text(r.fit_seconds) << "," << field(warnings);
   return s.str();
 }
 

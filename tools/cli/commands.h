@@ -22,6 +22,7 @@ void add_plot(CLI::App& app);
 void add_learners(CLI::App& app);
 void add_plugins(CLI::App& app);
 void add_diagnose(CLI::App& app);
+void add_check_plugin(CLI::App& app);
 
 // Option values that CLI11 would convert too leniently ("-1" into 2^64-1) are taken as
 // text and parsed here, with messages naming the option.

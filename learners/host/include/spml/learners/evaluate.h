@@ -43,6 +43,10 @@ struct BenchOptions {
   // merge: the shard folders, shard k's at k - 1; unit u is read from folder u % size() (the
   // shard that fitted it) and copied into out/units. Empty: units are read from out/units.
   std::vector<std::string> unit_sources;
+
+  // Throws LearnerError naming the option (as the command line spells it) when a value is out
+  // of range; run_bench() calls it, and so does `spml bench` before it loads anything.
+  void check() const;
 };
 
 struct BenchReport {
