@@ -3,7 +3,9 @@
 #include <gtest/gtest.h>
 
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
+#include <utility>
 #include <nlohmann/json.hpp>
 
 #include "test_util.h"
@@ -87,6 +89,35 @@ TEST(CliGenerate, UnknownScenarioIsAnError) {
   auto r = run(spml_bin() + " generate --scenario nope --out " + (spml::test::temp_dir("cli-gen") / "x.h5").string());
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.output.find("nope"), std::string::npos) << r.output;
+}
+
+// Issue #21: mj_id2name gives NULL for an unnamed joint; SimDyn's arm files (found through
+// $SPML_MJCF_DIR) with an unnamed or a free joint are refused naming index and type.
+TEST(CliGenerate, SimDynArmWithUnnamedOrFreeJointIsRefused) {
+  namespace fs = std::filesystem;
+  const fs::path dir = spml::test::temp_dir("cli-gen-joints");
+  for (const char* f : {"planar_arm3.xml", "planar_arm3_ll.xml", "planar_arm3_prior.xml"})
+    fs::copy_file(fs::path(SPML_SOURCE_DIR) / "mjcf" / f, dir / f, fs::copy_options::overwrite_existing);
+  std::ifstream in(dir / "planar_arm3.xml");
+  const std::string arm((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  struct Case {
+    std::string joint, replacement, message;
+  };
+  const std::string cmd = "SPML_MJCF_DIR=" + dir.string() + " " + spml_bin() + " generate --scenario simdyn-ll -q --out " +
+                          (dir / "x.h5").string();
+  for (const Case& c : {Case{"<joint name=\"joint1\"/>", "<joint/>", "joint 1 (hinge) has no name"},
+                        Case{"<joint name=\"joint0\"/>", "<freejoint name=\"joint0\"/>",
+                             "joint 0 'joint0' (free) is not a hinge or slide joint"}}) {
+    std::string changed = arm;
+    ASSERT_NE(changed.find(c.joint), std::string::npos);
+    changed.replace(changed.find(c.joint), c.joint.size(), c.replacement);
+    std::ofstream(dir / "planar_arm3.xml") << changed;
+    const auto r = run(cmd);
+    EXPECT_EQ(r.exit_code, 1) << r.output;
+    EXPECT_NE(r.output.find("spml: error: " + (dir / "planar_arm3_ll.xml").string() + ": " + c.message), std::string::npos)
+        << r.output;
+  }
+  EXPECT_FALSE(fs::exists(dir / "x.h5"));
 }
 
 TEST(CliImport, CsvRoundTripThroughInfo) {

@@ -156,7 +156,7 @@ class SupportVectorRegression : public LinearModel {
     // Constant or degenerate inputs: directions the data do not excite stay at 0, as in
     // LLS' minimum-norm fit. Unit-RMS scaling of a column that is nearly 0 in training gave
     // it a huge weight, and SVR predicted 1.8e6 N m on the arm's test split after training on
-    // one repeated state (LLS: 123).
+    // one repeated state (LLS: 123 N m).
     Eigen::VectorXd w;
     std::tie(w, bias_) = linear_svr(d.phi * basis, y, C, epsilon, tolerance);
     theta_ = basis * w;
@@ -165,21 +165,17 @@ class SupportVectorRegression : public LinearModel {
   }
 
  private:
-  // An orthonormal-in-scaled-units basis (M x r) of the parameter directions the data excite:
-  // the right singular vectors of the column-scaled regressor above LAPACK's rank threshold,
-  // mapped back to raw units.
+  // An orthonormal basis (M x r) of the parameter directions the data excite: the right
+  // singular vectors of the regressor above LAPACK's rank threshold, as LLS decides its rank.
+  // In raw units, as LLS' minimum norm: a basis taken after unit-norm column scaling leaned on
+  // the columns that are nearly 0 in training, and predicted 1.5e6 N m where they are not.
   static Eigen::MatrixXd excited_directions(const Eigen::MatrixXd& phi) {
     const Eigen::Index M = phi.cols();
-    Eigen::VectorXd scale(M);
-    for (Eigen::Index j = 0; j < M; ++j) {
-      const double norm = phi.col(j).stableNorm();
-      scale[j] = norm > 0 ? 1.0 / norm : 1.0;
-    }
-    Eigen::BDCSVD<Eigen::MatrixXd> svd(phi * scale.asDiagonal(), Eigen::ComputeThinV);
+    Eigen::BDCSVD<Eigen::MatrixXd> svd(phi, Eigen::ComputeThinV);
     svd.setThreshold(Eigen::NumTraits<double>::epsilon() * static_cast<double>(std::max(phi.rows(), M)));
     const Eigen::Index r = svd.rank();
     if (r == M) return Eigen::MatrixXd::Identity(M, M);
-    return scale.asDiagonal() * svd.matrixV().leftCols(r);
+    return svd.matrixV().leftCols(r);
   }
 };
 

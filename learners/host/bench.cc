@@ -542,10 +542,11 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bo
     if (static_cast<int>(units.size()) == fits) aggregate(scenario, name, deterministic, o.reps, units, parts, rows, predictions);
   }
 
+  // predictions.h5 first: when it cannot be written (a full disk), no results.csv claims the run.
   std::string csv = results_header() + "\n";
   for (const auto& r : rows) csv += results_line(r) + "\n";
-  write_text_atomic((fs::path(o.out) / "results.csv").string(), csv);
   write_matrix_file((fs::path(o.out) / "predictions.h5").string(), predictions);
+  write_text_atomic((fs::path(o.out) / "results.csv").string(), csv);
   return report;
 }
 

@@ -20,7 +20,8 @@ void add_import(CLI::App& app) {
   cmd->add_option("INPUT", a->input, "CSV or .mat file (or none, with --text)");
   cmd->add_option("--text", a->text, "a text log FILE=NAMES holding len(NAMES) values per sample, e.g. "
                                      "pos.txt=q:joint{1..7} (repeatable; replaces INPUT)");
-  cmd->add_option("--lowpass", a->lowpass, "zero-phase Butterworth low-pass cut-off [Hz] on every column (0: none)");
+  cmd->add_option("--lowpass", a->lowpass, "zero-phase Butterworth low-pass cut-off [Hz] on every column (0: none)")
+      ->check(finite_number(0.0, 1e12));
   cmd->add_option("--filter-order", a->order, "Butterworth order (even)")->capture_default_str();
   cmd->add_flag("--derive", a->spec.conditioning.derive, "add qd:/qdd:<joint> by central differences of q:<joint>");
   cmd->add_option("--drop-edges", a->drop, "samples dropped at each end after filtering/differentiation");
