@@ -102,6 +102,8 @@ class Datasets(Fixture):
             spml.identify(os.path.join(self.dir, "missing.xml"), self.toy)
         with self.assertRaisesRegex(FileNotFoundError, "missing.h5"):
             spml.diagnose(ARM, missing)
+        with self.assertRaisesRegex(FileNotFoundError, "nowhere: no such learner library or folder"):
+            spml.add_learner_path(os.path.dirname(missing))
         text = os.path.join(self.dir, "text.h5")
         with open(text, "w") as f:
             f.write("not HDF5\n")
@@ -241,6 +243,13 @@ class ModelsIdentifyDiagnose(unittest.TestCase):
             self.assertEqual(ident[key], cli[key])
         for key in ("estimate", "std_error", "prior"):
             self.assertEqual(ident[key].tolist(), cli[key])
+        # LLS on the MJCF's regressor (the model by path, as bench --model) is the same least
+        # squares: equal up to the two solvers' rounding (3.5e-13 measured)
+        model = spml.parametric_model(self.gl, mjcf=ARM)
+        self.assertEqual(model.param_names, ident["names"])
+        train = spml.read_dataset(self.gl)["splits"]["train"]
+        lls = spml.Learner("LLS").fit(train["X"], train["Y"], model=model)
+        np.testing.assert_allclose(lls.coef_, ident["estimate"], rtol=1e-9)
 
     def test_diagnose_names_the_hidden_band(self):
         out = os.path.join(self.tmp.name, "diag")

@@ -50,6 +50,10 @@ pb::array_t<double> to_numpy(const RowMatrix& m);
 pb::array_t<double> to_numpy(const Eigen::VectorXd& v);
 pb::array_t<double> to_numpy(const Eigen::MatrixXd& m);
 
+// Force-plugin libraries or folders added to the process's search path (--plugin-path).
+void add_plugin_path(const std::string& path);
+void add_plugin_paths(const std::vector<std::string>& paths);
+
 // Registration of each part (one file each), called by module.cc.
 void bind_dataset(pb::module_& m);
 void bind_learners(pb::module_& m);

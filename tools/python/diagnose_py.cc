@@ -4,7 +4,6 @@
 
 #include "convert.h"
 #include "spml/diagnose.h"
-#include "spml/force_effects.h"
 
 namespace spml::py {
 namespace {
@@ -29,7 +28,7 @@ void check(const DiagnoseOptions& o) {
 
 pb::object run(const std::string& model, const std::string& data, const std::string& out, const DiagnoseOptions& settings,
                const std::vector<std::string>& plugin_path) {
-  for (const auto& p : plugin_path) force_plugins().add(p, true);
+  add_plugin_paths(plugin_path);
   DiagnoseOptions o = settings;
   o.model = model;
   o.data = data;

@@ -214,7 +214,8 @@ class NativeLearner {
 void bind_learners(pb::module_& m) {
   m.def("learners", [](bool compositions) { return compositions ? registry().expand("all") : registry().plugin_names(); },
         pb::arg("compositions") = false);
-  m.def("add_learner_path", [](const std::string& p) { registry().add(p); }, pb::arg("path"));
+  m.def(
+      "add_learner_path", [](const std::string& p) { naming_missing_files({p}, [&] { registry().add(p); }); }, pb::arg("path"));
   m.def("learner_warnings", [] { return registry().warnings(); });
   m.def("learner_info", &learner_info, pb::arg("name"));
   m.def("config_problem", &config_problem, pb::arg("name"), pb::arg("key"), pb::arg("value"));

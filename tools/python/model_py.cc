@@ -47,10 +47,6 @@ class PyParametricModel {
 
 pb::object optional(const Eigen::VectorXd& v) { return v.size() ? pb::object(to_numpy(v)) : pb::none(); }
 
-void add_plugin_paths(const std::vector<std::string>& paths) {
-  for (const auto& p : paths) force_plugins().add(p, true);
-}
-
 std::unique_ptr<MjcfRegressor> load_regressor(const std::string& model, bool offsets) {
   return naming_missing_files({model}, [&] { return std::make_unique<MjcfRegressor>(model, RegressorOptions{offsets}); });
 }
@@ -107,6 +103,13 @@ pb::dict identify_dict(const std::string& model, const pb::handle& data, const s
 
 }  // namespace
 
+void add_plugin_path(const std::string& p) {
+  naming_missing_files({p}, [&] { force_plugins().add(p, true); });
+}
+void add_plugin_paths(const std::vector<std::string>& paths) {
+  for (const auto& p : paths) add_plugin_path(p);
+}
+
 void bind_models(pb::module_& m) {
   pb::class_<PyParametricModel>(m, "ParametricModel")
       .def(pb::init<const pb::handle&, const std::string&, const std::string&>(), pb::arg("data"), pb::arg("mjcf") = "",
@@ -120,7 +123,7 @@ void bind_models(pb::module_& m) {
       .def_property_readonly("outputs", [](const PyParametricModel& p) { return p.model().num_outputs(); })
       .def_readonly("x_columns", &PyParametricModel::x_columns_)
       .def_readonly("y_columns", &PyParametricModel::y_columns_);
-  m.def("add_plugin_path", [](const std::string& p) { force_plugins().add(p, true); }, pb::arg("path"));
+  m.def("add_plugin_path", &add_plugin_path, pb::arg("path"));
   m.def("regressor", &regressor_dict, pb::arg("model"), pb::arg("offsets") = false,
         pb::arg("plugin_path") = std::vector<std::string>{});
   m.def("identify", &identify_dict, pb::arg("model"), pb::arg("data"), pb::arg("split") = "train", pb::arg("offsets") = false,
