@@ -39,6 +39,8 @@ class Learner:
     predict(X, return_std=False, phi=None)
         The mean (rows x outputs); with return_std also the predictive standard deviation
         (noise included), None for a learner without a variance.
+    score(X, Y, phi=None)
+        R^2, as scikit-learn's regressors (for cross_val_score, GridSearchCV).
     After fit: coef_ (fitted parametric coefficients or None), notes_ (the fit's warnings),
     n_features_in_, flags (what the learner is: uses_model, variance, deterministic, ...).
     """
@@ -107,6 +109,16 @@ class Learner:
             mean = mean[:, 0]
             std = None if std is None else std[:, 0]
         return (mean, std) if return_std else mean
+
+    def score(self, X, Y, phi=None):
+        """R^2 of the predicted mean, averaged over the outputs (scikit-learn's convention for
+        regressors, so cross_val_score and GridSearchCV work; spml.score gives bench's
+        RMSE and NLLH)."""
+        Y = np.asarray(Y, dtype=np.float64).reshape(len(X), -1)
+        mean = np.asarray(self.predict(X, phi=phi)).reshape(Y.shape)
+        residual = ((Y - mean) ** 2).sum(axis=0)
+        total = ((Y - Y.mean(axis=0)) ** 2).sum(axis=0)
+        return float(np.mean(1 - residual / total))
 
     @property
     def flags(self):
