@@ -4,7 +4,7 @@ read back to the bit (with spml and with plain h5py), Toy rows fitted from Pytho
 `spml bench`'s to the bit, identify and diagnose equal to the commands' JSON, the sklearn
 estimator contract, errors that name the file. Run by ctest (PythonModule) with
 PYTHONPATH=<build>/python; environment: SPML_BIN (the spml binary), SPML_SOURCE_DIR,
-SPML_BUILD_DIR (for the install check)."""
+SPML_BUILD_DIR and SPML_CMAKE (for the install check)."""
 import json
 import os
 import subprocess
@@ -214,6 +214,10 @@ class EstimatorContract(unittest.TestCase):
         self.assertTrue(np.all(r2 > 0.9), r2)   # 0.957-0.978 measured
         search = GridSearchCV(spml.Learner("GP"), {"max_evals": [2, 100]}, cv=3).fit(X, y)
         self.assertEqual(search.best_params_, {"max_evals": 100})
+        import pickle
+        self.assertEqual(pickle.loads(pickle.dumps(spml.Learner("GP", max_evals=3))).get_params()["max_evals"], 3)
+        with self.assertRaisesRegex(TypeError, "a fitted spml.Learner .GP. cannot be pickled"):
+            pickle.dumps(search.best_estimator_)
 
     def test_same_seed_same_numbers(self):
         rng = np.random.default_rng(0)
@@ -282,7 +286,8 @@ class Installed(unittest.TestCase):
     def test_installed_module_finds_the_installed_learners(self):
         build = os.environ["SPML_BUILD_DIR"]
         with tempfile.TemporaryDirectory() as prefix:
-            subprocess.run(["cmake", "--install", build, "--prefix", prefix, "--component", "spml_runtime"],
+            cmake = os.environ.get("SPML_CMAKE", "cmake")
+            subprocess.run([cmake, "--install", build, "--prefix", prefix, "--component", "spml_runtime"],
                            check=True, capture_output=True)
             env = dict(os.environ, PYTHONPATH=os.path.join(prefix, "lib", "python3", "dist-packages"))
             env.pop("SPML_LEARNER_PATH", None)

@@ -120,6 +120,13 @@ class Learner:
         total = ((Y - Y.mean(axis=0)) ** 2).sum(axis=0)
         return float(np.mean(1 - residual / total))
 
+    def __getstate__(self):
+        # An unfitted learner is its parameters (so joblib can ship it to workers); a fitted
+        # one's state lives inside the plugin library, which has no serialisation.
+        if getattr(self, "_native", None) is not None:
+            raise TypeError(f"a fitted spml.Learner ({self.name}) cannot be pickled: its state lives in the learner plugin")
+        return self.__dict__
+
     @property
     def flags(self):
         return _spml.learner_info(self.name)["flags"]
