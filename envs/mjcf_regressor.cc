@@ -7,15 +7,10 @@
 #include <random>
 #include <sstream>
 
+#include "spml/parse.h"
+
 namespace spml {
 namespace {
-
-std::string fmt(double v) {
-  std::ostringstream s;
-  s.precision(4);
-  s << v;
-  return s.str();
-}
 
 // Newton-Euler wrench of one body, in its frame, as a 6 x 10 matrix acting on
 // (m, hx, hy, hz, Ixx, Iyy, Izz, Ixy, Ixz, Iyz): rows 0-2 force, rows 3-5 moment about the
@@ -220,7 +215,7 @@ MjcfRegressor::Base MjcfRegressor::base_parameters(int samples, std::uint64_t se
       double c = base.Kd(i, k);
       if (c == 0) continue;
       bool unit = std::fabs(std::fabs(c) - 1.0) < 1e-9;
-      name += (c > 0 ? " + " : " - ") + (unit ? std::string() : fmt(std::fabs(c)) + "*") + names_[base.dependent[k]];
+      name += (c > 0 ? " + " : " - ") + (unit ? std::string() : number_text(std::fabs(c), 4) + "*") + names_[base.dependent[k]];
       value += c * pi_[base.dependent[k]];
     }
     base.names.push_back(name);
@@ -307,7 +302,7 @@ Identification identify(const MjcfRegressor& reg, const MjcfRegressor::Base& bas
     std::sort(w.begin(), w.end());
     std::string names;
     for (size_t i = 0; i < w.size() && i < 3 && -w[i].first > 0.1; ++i) names += (names.empty() ? "" : "; ") + out.names[w[i].second];
-    throw DatasetError(where + ": the data do not excite every base parameter (condition number " + fmt(out.condition) +
+    throw DatasetError(where + ": the data do not excite every base parameter (condition number " + number_text(out.condition, 4) +
                        "): not identifiable from this data: " + names +
                        " (does every joint move, with varying speed and acceleration?)");
   }

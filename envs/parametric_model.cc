@@ -1,5 +1,6 @@
 #include "spml/envs/parametric_model.h"
 
+#include <cstdlib>
 #include <filesystem>
 #include <map>
 #include <mutex>
@@ -45,6 +46,39 @@ class MjcfModel : public ParametricModel {
   JointColumns cols_;
 };
 
+// A private folder (mkdtemp, mode 0700) removed with everything in it when it goes.
+class PrivateDir {
+ public:
+  PrivateDir() {
+    std::string pattern = (fs::temp_directory_path() / "spml-model-XXXXXX").string();
+    if (!::mkdtemp(pattern.data())) throw DatasetError("cannot create a private temporary folder in " + fs::temp_directory_path().string());
+    path_ = pattern;
+  }
+  ~PrivateDir() {
+    std::error_code ec;
+    fs::remove_all(path_, ec);
+  }
+  const fs::path& path() const { return path_; }
+
+ private:
+  fs::path path_;
+};
+
+// The dataset's own MJCF text (model/mjcf_xml). MuJoCo 2.2.2 loads models from files, so the
+// text goes into a private folder nobody else can write to (a predictable name in $TMPDIR
+// let a planted file change the model). Files it would include are refused: next to a
+// temporary copy they cannot be found, and nothing else says where they are.
+std::unique_ptr<ParametricModel> embedded_mjcf_model(const Dataset& ds, const Split& layout, const std::string& where) {
+  const std::string& xml = ds.model.mjcf_xml;
+  if (const auto at = xml.find("<include"); at != std::string::npos)
+    throw DatasetError("group 'model': attribute 'mjcf_xml' includes other files ('" + xml.substr(at, 60) +
+                       "...'), which an embedded model cannot resolve; store the model's path in mjcf_path or give "
+                       "the MJCF with --model");
+  PrivateDir dir;
+  const fs::path file = dir.path() / "model.xml";
+  write_text_atomic(file.string(), xml);
+  return std::make_unique<MjcfModel>(file.string(), where + ":model/mjcf_xml", ds, layout);
+}
 
 }  // namespace
 
@@ -119,16 +153,7 @@ std::unique_ptr<ParametricModel> make_parametric_model(const Dataset& ds, const 
     } else if (auto it = factories().find(ds.model.name); !ds.model.name.empty() && it != factories().end()) {
       model = it->second(ds, layout);
     } else if (!ds.model.mjcf_xml.empty()) {
-      // MuJoCo 2.2.2 loads models from files: write the stored text next to nothing else.
-      const fs::path tmp = fs::temp_directory_path() / ("spml-model-" + std::to_string(::getpid()) + ".xml");
-      write_text_atomic(tmp.string(), ds.model.mjcf_xml);
-      try {
-        model = std::make_unique<MjcfModel>(tmp.string(), where + ":model/mjcf_xml", ds, layout);
-      } catch (...) {
-        fs::remove(tmp);
-        throw;
-      }
-      fs::remove(tmp);
+      model = embedded_mjcf_model(ds, layout, where);
     } else if (!ds.model.mjcf_path.empty()) {
       const std::string file = resolve_mjcf_path(ds.model.mjcf_path, where);
       model = std::make_unique<MjcfModel>(file, file, ds, layout);

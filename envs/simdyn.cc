@@ -4,6 +4,8 @@
 // force plugins declared in mjcf/planar_arm3_{ll,gl}.xml.
 #include <random>
 #include <sstream>
+#include <stdexcept>
+#include <string>
 
 #include "signals.h"
 #include "spml/envs/mujoco_model.h"
@@ -112,6 +114,22 @@ Split make_split(const std::string& name, const Rollout& r, Eigen::Index begin, 
   return s;
 }
 
+// The dataset's columns are q:/qd:/qdd:/tau:<joint>: every joint of the arm needs a name and
+// one degree of freedom (mj_id2name gives NULL for an unnamed joint).
+std::string named_joint(const mjModel* m, int j, const std::string& file) {
+  static const char* const kTypes[] = {"free", "ball", "slide", "hinge"};
+  const int type = m->jnt_type[j];
+  const std::string kind = type >= 0 && type < 4 ? kTypes[type] : "type " + std::to_string(type);
+  const char* name = mj_id2name(m, mjOBJ_JOINT, j);
+  if (type != mjJNT_HINGE && type != mjJNT_SLIDE)
+    throw std::runtime_error(file + ": joint " + std::to_string(j) + (name ? " '" + std::string(name) + "'" : "") + " (" +
+                             kind + ") is not a hinge or slide joint; the SimDyn arm needs one per link");
+  if (!name || !*name)
+    throw std::runtime_error(file + ": joint " + std::to_string(j) + " (" + kind +
+                             ") has no name; the dataset's columns are named after the joints");
+  return name;
+}
+
 std::string declarations_text(const ForceEffects& fx) {
   std::ostringstream out;
   for (const auto& inst : fx.instances()) {
@@ -131,10 +149,10 @@ Dataset generate_simdyn(bool global_mismatch, const GenerateOptions& options, bo
   ModelPtr sim = load_mjcf(path);
   ModelPtr truth = load_mjcf(mjcf_path("planar_arm3.xml"));
   ModelPtr prior = load_mjcf(mjcf_path("planar_arm3_prior.xml"));
+  std::vector<std::string> joints;
+  for (int j = 0; j < sim->njnt; ++j) joints.push_back(named_joint(sim.get(), j, path));
   ForceEffects effects(sim.get(), path);
   effects.attach();
-  std::vector<std::string> joints;
-  for (int j = 0; j < sim->njnt; ++j) joints.push_back(mj_id2name(sim.get(), mjOBJ_JOINT, j));
 
   std::mt19937_64 rng(options.seed);
   const std::string label = std::string(global_mismatch ? "simdyn-gl" : "simdyn-ll") + (fresh_interp ? "-fresh" : "");

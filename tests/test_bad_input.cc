@@ -6,6 +6,9 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <nlohmann/json.hpp>
+
+#include "spml/dataset.h"
 
 #include "spml/learners/results.h"
 #include "test_util.h"
@@ -157,6 +160,178 @@ TEST(BadInput, SearchPathsWarnAlikeAndSkipBrokenLibraries) {
   EXPECT_NE(r.output.find("LLS\t"), std::string::npos) << r.output;
   // Named explicitly, a broken library is an error.
   expect_error(spml("learners --learner-path " SPML_TEST_LEARNER_DIR "/wrong_abi_learner.so"), 1, {"wrong_abi_learner.so: learner ABI version 99"});
+}
+
+// ---- Issue #21: hardening, second round ----
+
+std::string read_file(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+TEST(Hardening, EveryFloatOptionMustBeFinite) {
+  const std::string diagnose = spml("diagnose --model " + mjcf("planar_arm3.xml") + " --data " + f("arm.h5") + " --out " + f("d1") + " ");
+  for (const std::string opt : {"--holdout", "--min-gain", "--still-speed", "--rollout-seconds", "--bic-threshold"})
+    for (const std::string bad : {"nan", "inf", "-inf", "1e999"})
+      expect_error(diagnose + opt + " " + bad, 2, {opt + ": '" + bad + "' is not a finite number"});
+  expect_error(diagnose + "--holdout 0.95", 2, {"--holdout: '0.95' is outside [0.05, 0.9]"});
+  expect_error(spml("plot --results " + f("none.csv") + " --out " + f("p1") + " --window nan"), 2,
+               {"--window: 'nan' is not a finite number"});
+  expect_error(spml("plot --results " + f("none.csv") + " --out " + f("p1") + " --window 0"), 2, {"--window: '0' is outside (0,"});
+  expect_error(spml("import --text " + f("log.txt") + "=a --x a --y a --lowpass nan -o " + f("l.h5")), 2,
+               {"--lowpass: 'nan' is not a finite number"});
+  EXPECT_FALSE(fs::exists(f("d1")));
+}
+
+TEST(Hardening, TextLogsEmptyNamesAndRaggedLines) {
+  std::ofstream(f("log.txt")) << "1 2\n3 4\n5\n6 7 8\n";
+  expect_error(spml("import --text " + f("log.txt") + "= --x a --y b -o " + f("l.h5")), 1,
+               {"log.txt: no column names after '='"});
+  expect_error(spml("import --text " + f("log.txt") + "=a,b --x a --y b -o " + f("l.h5")), 1,
+               {"log.txt:3: 1 values, but line 1 and those after it hold 2 (a ragged log"});
+  EXPECT_FALSE(fs::exists(f("l.h5")));
+}
+
+TEST(Hardening, ImportRefusesLeaksDisorderAndOddOutputs) {
+  const std::string csv = f("bom.csv");
+  std::ofstream(csv) << "\xEF\xBB\xBFt,a,y\n0,1,2\n0.1,2,4\n0.2,3,6\n0.3,4,8\n";
+  expect_error(spml("import " + csv + " --x a --y a -o " + f("i1.h5")), 1,
+               {"bom.csv: column 'a' is both an input (--x a) and a target (--y a)"});
+  // The byte order mark is not part of the first name: --t t finds the column.
+  auto r = run(spml("import " + csv + " --x a --y y --t t -o " + f("i2.h5")));
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  std::ofstream(f("unsorted.csv")) << "t,a,y\n0,1,2\n0.2,2,4\n0.1,3,6\n0.3,4,8\n";
+  expect_error(spml("import " + f("unsorted.csv") + " --x a --y y --t t -o " + f("i3.h5")), 1,
+               {"unsorted.csv: column 't': rows are not in time order (data row 3: t = 0.1 after t = 0.2)"});
+  // -o that is a folder is named as given, not as the temporary file.
+  fs::create_directories(f("outdir"));
+  expect_error(spml("import " + csv + " --x a --y y -o " + f("outdir")), 1, {f("outdir") + ": is a directory"});
+  r = run(spml("import " + csv + " --x a --y y -o " + f("outdir")));
+  EXPECT_EQ(r.output.find(".tmp-"), std::string::npos) << r.output;
+  // HDF5's own error stack is not printed before spml's message.
+  r = run(spml("import " + f("toy.h5") + " --format mat --x x --y y -o " + f("i4.h5")));
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_EQ(r.output.find("HDF5-DIAG"), std::string::npos) << r.output;
+  EXPECT_LT(std::count(r.output.begin(), r.output.end(), '\n'), 3) << r.output;
+}
+
+TEST(Hardening, MatFilesOfEveryIntegerTypeTiesAndTruncation) {
+  const std::string mat = f("ints.mat"), truncated = f("ints_truncated.mat");
+  auto r = run("/usr/bin/python3 -c \"import numpy as np, scipy.io as sio, sys; n = 6; "
+               "sio.savemat(sys.argv[1], {'t': np.arange(n) * 0.1, 'i16': np.array([-3, -2, -1, 0, 1, 30000], np.int16), "
+               "'u16': np.arange(n, dtype=np.uint16) * 10000, 'i64': np.arange(n, dtype=np.int64) * 2**40, "
+               "'s1': np.arange(3.0), 's2': np.arange(3.0)}); "
+               "d = open(sys.argv[1], 'rb').read(); open(sys.argv[2], 'wb').write(d[:len(d) - 20])\" " + mat + " " + truncated);
+  if (r.exit_code != 0) GTEST_SKIP() << "no /usr/bin/python3 with scipy: " << r.output;
+  // Four vectors of 6 samples (the record) and two of 3.
+  r = run(spml("import " + mat + " --x a=i16,b=u16 --y c=i64 --t t -o " + f("m1.h5") + " && " + spml("info --json " + f("m1.h5"))));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const auto j = nlohmann::json::parse(r.output.substr(r.output.find('{')));
+  const auto& x = j["splits"][0]["X"]["columns"];
+  EXPECT_EQ(x[0]["min"].get<double>(), -3.0);
+  EXPECT_EQ(x[0]["max"].get<double>(), 30000.0);
+  EXPECT_EQ(x[1]["max"].get<double>(), 50000.0);
+  EXPECT_EQ(j["splits"][0]["Y"]["columns"][0]["max"].get<double>(), 5.0 * 1099511627776.0);
+  expect_error(spml("import " + truncated + " --x a=i16 --y c=i64 -o " + f("m2.h5")), 1, {"ints_truncated.mat: truncated .mat file"});
+  // A tie between record lengths takes the longer vectors, and names the others.
+  r = run("/usr/bin/python3 -c \"import numpy as np, scipy.io as sio, sys; "
+          "sio.savemat(sys.argv[1], {'a': np.arange(5.0), 'b': np.arange(5.0), 'x': np.arange(8.0), 'y': np.arange(8.0)})\" " + f("tie.mat"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = run(spml("import " + f("tie.mat") + " --x x --y y -o " + f("m3.h5")));
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("train [8 rows]"), std::string::npos) << r.output;
+  expect_error(spml("import " + f("tie.mat") + " --x a --y y -o " + f("m4.h5")), 1,
+               {"no column 'a' (available: x, y); vectors of another length, not columns: a (5 samples), b (5 samples)"});
+}
+
+// A full disk: tmpfs of 64 KiB in a private mount namespace (unshare -rm, which needs no
+// privileges where user namespaces are allowed), or else a file size limit (RLIMIT_FSIZE via
+// ulimit -f, SIGXFSZ ignored so that write() fails with EFBIG). The command's exit code and
+// the folder's listing are printed from inside, where the small disk is.
+struct SmallDisk {
+  std::string how;
+  std::string run(const std::string& folder, const std::string& cmd) const {
+    const std::string body = cmd + "; echo \"rc=$?\"; ls -A " + folder;
+    if (how == "tmpfs")
+      return spml::test::run("unshare -rm sh -c 'mount -t tmpfs -o size=64k tmpfs " + folder + " && { " + body + "; }'").output;
+    return spml::test::run("sh -c 'trap \"\" XFSZ; ulimit -f 128; " + body + "'").output;
+  }
+};
+
+SmallDisk small_disk(const std::string& folder) {
+  fs::create_directories(folder);
+  const auto r = spml::test::run("unshare -rm sh -c 'mount -t tmpfs -o size=64k tmpfs " + folder + " && echo mounted'");
+  return {r.output.find("mounted") != std::string::npos ? "tmpfs" : "fsize"};
+}
+
+TEST(Hardening, FullDiskIsAnErrorAndLeavesNoTemporaryFiles) {
+  const std::string disk = f("disk");
+  const SmallDisk d = small_disk(disk);
+  std::cout << "small disk: " << (d.how == "tmpfs" ? "a 64 KiB tmpfs in a user namespace" : "RLIMIT_FSIZE 64 KiB") << "\n";
+  std::ofstream big(f("big.csv"));
+  big << "t,a,y\n";
+  for (int i = 0; i < 20000; ++i) big << i * 0.01 << "," << i % 7 << "," << i % 5 << "\n";
+  big.close();
+  for (const std::string& cmd : {spml("generate --scenario simdyn-ll --test-stride 50 -q --out " + disk + "/arm.h5"),
+                                 spml("import " + f("big.csv") + " --x a --y y --t t -o " + disk + "/big.h5"),
+                                 spml("bench --data " + f("arm.h5") + " --learners LLS --reps 1 --out " + disk + "/bench")}) {
+    const std::string out = d.run(disk, cmd);
+    EXPECT_NE(out.find("rc=1"), std::string::npos) << cmd << "\n" << out;
+    EXPECT_NE(out.find("spml: error: " + disk), std::string::npos) << cmd << "\n" << out;
+    EXPECT_EQ(out.find(".tmp-"), std::string::npos) << cmd << "\n" << out;
+    EXPECT_EQ(out.find("HDF5-DIAG"), std::string::npos) << cmd << "\n" << out;
+  }
+}
+
+TEST(Hardening, EmbeddedModelsLiveInAPrivateFolderAndIncludeNothing) {
+  const std::string arm = f("arm.h5");
+  spml::Dataset ds = spml::read_dataset(arm);
+  ds.model = {};
+  ds.model.mjcf_xml = read_file(mjcf("planar_arm3.xml"));
+  spml::write_dataset(f("arm_inline.h5"), ds);
+  ds.model.mjcf_xml = "<mujoco model=\"x\"><include file=\"planar_arm3.xml\"/></mujoco>";
+  spml::write_dataset(f("arm_include.h5"), ds);
+  const std::string tmp = f("tmpdir");
+  fs::create_directories(tmp);
+  // A file planted under the old predictable name changes nothing.
+  std::ofstream(tmp + "/planar_arm3.xml") << "<mujoco><worldbody/></mujoco>";
+  expect_error("TMPDIR=" + tmp + " " + spml("bench --data " + f("arm_include.h5") + " --out " + f("e1") + " --learners LLS"), 1,
+               {"arm_include.h5: group 'model': attribute 'mjcf_xml' includes other files"});
+  auto r = run("TMPDIR=" + tmp + " " + spml("bench --data " + f("arm_inline.h5") + " --out " + f("e2") + " --learners LLS --reps 1"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  ASSERT_EQ(run(spml("bench --data " + arm + " --out " + f("e3") + " --learners LLS")).exit_code, 0);
+  for (int o = 0; o < 3; ++o)
+    EXPECT_NEAR(rmse(f("e2/results.csv"), "test_interp", "LLS", o) / rmse(f("e3/results.csv"), "test_interp", "LLS", o), 1.0, 1e-6);
+  std::vector<std::string> left;
+  for (const auto& e : fs::directory_iterator(tmp)) left.push_back(e.path().filename().string());
+  EXPECT_EQ(left, std::vector<std::string>{"planar_arm3.xml"});   // the private folder is gone
+}
+
+TEST(Hardening, NonUtf8PathsAreNamedBeforeAnythingIsWritten) {
+  const std::string latin1 = f("caf\xe9.h5");
+  fs::copy_file(f("toy.h5"), latin1, fs::copy_options::overwrite_existing);
+  expect_error(spml("bench --data '" + latin1 + "' --out " + f("u1") + " --learners LLS"), 1,
+               {latin1 + ": bench.json field 'data': not valid UTF-8 (byte 0xe9"});
+  EXPECT_FALSE(fs::exists(f("u1")));
+  expect_error(spml("info --json '" + latin1 + "'"), 1, {latin1 + ": the file name is not valid UTF-8"});
+  EXPECT_EQ(run(spml("info '" + latin1 + "'")).exit_code, 0);
+}
+
+// An interrupted bench of other data must not leave a bench.json that disagrees with the
+// results.csv beside it: killed at any moment, the folder holds either the old pair or the
+// new bench.json without results.
+TEST(Hardening, InterruptedBenchLeavesNoDisagreeingFiles) {
+  const std::string out = f("agree");
+  ASSERT_EQ(run(spml("bench --data " + f("toy.h5") + " --out " + out + " --learners LLS")).exit_code, 0);
+  const auto r = run("timeout -s KILL 3 " + spml("bench --data " + f("arm.h5") + " --out " + out + " --learners GP --reps 1"));
+  EXPECT_NE(r.exit_code, 0) << "the GP fit ended within 3 s; the test needs it killed\n" << r.output;
+  const auto manifest = nlohmann::json::parse(read_file(out + "/bench.json"));
+  if (fs::exists(out + "/results.csv")) {
+    const std::string scenario = manifest["data"].get<std::string>() == fs::absolute(f("toy.h5")).string() ? "toy" : "simdyn-ll";
+    for (const auto& row : spml::read_results(out + "/results.csv")) EXPECT_EQ(row.scenario, scenario);
+  }
+  EXPECT_EQ(manifest["data"].get<std::string>(), fs::absolute(f("arm.h5")).string());
+  EXPECT_FALSE(fs::exists(out + "/results.csv"));
 }
 
 }  // namespace

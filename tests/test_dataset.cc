@@ -188,3 +188,97 @@ TEST(Import, TextLogsWithSeveralValuesPerSample) {
     EXPECT_NE(std::string(e.what()).find("pos.txt: 6 values are not a whole number of samples of 4"), std::string::npos) << e.what();
   }
 }
+
+namespace {
+
+// The message of the DatasetError `f` throws ("" when it throws none).
+template <class F>
+std::string error_of(F f) {
+  try {
+    f();
+  } catch (const spml::DatasetError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+}  // namespace
+
+// Issue #21: a log whose lines hold different counts shifted values between columns; an
+// empty name list divided by zero.
+TEST(Import, RaggedTextLogsAndEmptyNameListsAreRefused) {
+  auto dir = spml::test::temp_dir("textlog-ragged");
+  const std::string log = (dir / "pos.txt").string();
+  std::ofstream(log) << "1 2 3\n4 5 6\n7 8\n9 10 11 12\n";   // 12 values: 4 samples of 3 by count alone
+  EXPECT_NE(error_of([&] { read_text_logs({log + "=a,b,c"}); }).find("pos.txt:3: 2 values, but line 1 and those after it hold 3"),
+            std::string::npos);
+  EXPECT_NE(error_of([&] { read_text_logs({log + "="}); }).find("pos.txt: no column names after '='"), std::string::npos);
+  EXPECT_NE(error_of([&] { read_text_logs({log + "=a,,b"}); }).find("empty column name"), std::string::npos);
+  std::ofstream(log) << "1 2\n3 4\n5 6\n";   // two values a line, three names: no sample layout fits
+  EXPECT_NE(error_of([&] { read_text_logs({log + "=a,b,c"}); }).find("pos.txt:1: 2 values on a line, but a sample has 3"),
+            std::string::npos);
+}
+
+TEST(Import, QuotedCsvCellsAndByteOrderMark) {
+  auto dir = spml::test::temp_dir("csv-quotes");
+  const std::string csv = (dir / "in.csv").string();
+  std::ofstream(csv) << "\xEF\xBB\xBFt,\"a,b\",\"say \"\"hi\"\"\"\n0,1,2\n0.1, 3 ,\"4\"\n";
+  const Table t = read_csv_table(csv);
+  ASSERT_EQ(t.names, (std::vector<std::string>{"t", "a,b", "say \"hi\""}));
+  EXPECT_EQ(t.columns[1], Eigen::Vector2d(1, 3));
+  EXPECT_EQ(t.columns[2], Eigen::Vector2d(2, 4));
+  std::ofstream(csv) << "t,a\n0,\"1\n";
+  EXPECT_NE(error_of([&] { read_csv_table(csv); }).find("in.csv:2: a quoted cell is not closed"), std::string::npos);
+}
+
+TEST(Import, TargetLeaksUnsortedTimeAndStrayTimeStampsAreRefused) {
+  Table t;
+  t.source = "log.csv";
+  t.names = {"t", "a", "y"};
+  const Eigen::Index n = 1000;
+  Eigen::VectorXd time = Eigen::VectorXd::LinSpaced(n, 0.0, 0.999);
+  t.columns = {time, Eigen::VectorXd::Random(n), Eigen::VectorXd::Random(n)};
+  ImportSpec spec;
+  spec.x = {"a"};
+  spec.y = {"b=a*2"};
+  EXPECT_NE(error_of([&] { table_to_dataset(t, spec); }).find("log.csv: column 'a' is both an input (--x a) and a target (--y b=a*2)"),
+            std::string::npos);
+  spec.y = {"y"};
+  spec.t = "t";
+  std::swap(t.columns[0][10], t.columns[0][11]);
+  EXPECT_NE(error_of([&] { table_to_dataset(t, spec); }).find("log.csv: column 't': rows are not in time order (data row 12"),
+            std::string::npos);
+  std::swap(t.columns[0][10], t.columns[0][11]);
+  t.columns[0][n - 1] = 1e5;   // one stray stamp: a 1 ms grid to 1e5 s would be 1e8 rows
+  spec.conditioning.lowpass_hz = 50;
+  EXPECT_NE(error_of([&] { table_to_dataset(t, spec); }).find("would make 1e+08 rows from 1000 (the largest gap: row 999"),
+            std::string::npos);
+  t.columns[0][n - 1] = 0.999;
+  spec.conditioning.lowpass_hz = 600;   // above the 500 Hz Nyquist rate of 1 kHz samples
+  EXPECT_NE(error_of([&] { table_to_dataset(t, spec); }).find("log.csv: --lowpass 600 Hz: the cut-off must lie below half the sampling rate, 500 Hz"),
+            std::string::npos);
+  spec.conditioning.lowpass_hz = 50;
+  EXPECT_EQ(table_to_dataset(t, spec).splits[0].rows(), n);
+}
+
+TEST(Dataset, TimeOrderAndUtf8NamesAreChecked) {
+  Dataset ds = small_dataset();
+  ds.splits[1].t[3] = 0.05;
+  EXPECT_NE(error_of([&] { validate(ds, "f.h5"); }).find("f.h5: group 'test': dataset 't': rows are not in time order (row 3"),
+            std::string::npos);
+  ds = small_dataset();
+  ds.splits[0].x_columns[1] = "qd:\xe9";   // Latin-1, not UTF-8
+  EXPECT_NE(error_of([&] { validate(ds, "f.h5"); }).find("f.h5: group 'train': dataset 'X': attribute 'columns': not valid UTF-8 (byte 0xe9 at offset 3"),
+            std::string::npos);
+  EXPECT_EQ(utf8_problem("q:\xc3\xa9 \xe2\x82\xac \xf0\x9f\x98\x80"), "");   // é, €, an emoji
+  EXPECT_NE(utf8_problem("\xed\xa0\x80"), "");                               // a UTF-16 surrogate
+  EXPECT_NE(utf8_problem("\xc0\xaf"), "");                                   // overlong
+}
+
+TEST(Dataset, OutputThatIsAFolderIsNamedAsGiven) {
+  auto dir = spml::test::temp_dir("out-folder");
+  const std::string folder = (dir / "sub").string();
+  std::filesystem::create_directories(folder);
+  EXPECT_EQ(error_of([&] { write_dataset(folder, small_dataset()); }), folder + ": is a directory; give a file name to write");
+  for (const auto& e : std::filesystem::directory_iterator(dir)) EXPECT_EQ(e.path().filename(), "sub");
+}

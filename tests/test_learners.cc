@@ -4,13 +4,18 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <random>
 
+#include "spml/envs/mujoco_model.h"
 #include "spml/envs/parametric_model.h"
 #include "spml/envs/scenarios.h"
 #include "spml/learners/compare.h"
 #include "spml/learners/evaluate.h"
+#include "spml/force_effects.h"
+#include "spml/force_plugin.h"
+#include "spml/learners/results.h"
 #include "spml/matrix_file.h"
 #include "test_util.h"
 
@@ -462,3 +467,165 @@ TEST(Cli, BenchAndCompare) {
 }
 
 }  // namespace
+
+namespace {
+
+// A dataset file made from a generated scenario by `change`, written once per name.
+std::string changed_scenario(const std::string& name, const std::string& from,
+                             const std::function<void(spml::Dataset&)>& change) {
+  const fs::path path = test::temp_dir("learners") / (name + ".h5");
+  if (!fs::exists(path)) {
+    Dataset ds = read_dataset(scenario_file(from));
+    change(ds);
+    write_dataset(path.string(), ds);
+  }
+  return path.string();
+}
+
+}  // namespace
+
+// Issue #21: squares of 1e200 overflow and of 1e-300 underflow; the scores must not.
+TEST(Evaluator, ScoresUseScaledSums) {
+  for (const double scale : {1e200, 1e-300}) {
+    RowMatrix Y(2, 1);
+    Y << 1.0 * scale, 2.0 * scale;
+    LearnerPrediction p;
+    p.mean = RowMatrix::Zero(2, 1);
+    p.var = RowMatrix::Constant(2, 1, 1.0);
+    p.var(0, 0) = scale * scale > 0 && std::isfinite(scale * scale) ? scale * scale : 1.0;
+    const Scores s = score(Y, p);
+    EXPECT_NEAR(s.rmse[0] / scale, std::sqrt(2.5), 1e-12) << scale;
+    EXPECT_TRUE(std::isfinite(s.nllh[0])) << scale;
+  }
+}
+
+// Constant inputs: every regressor row is the same phi_c, rank 1, and the minimum-norm least
+// squares solution is theta = phi_c * mean(y) / |phi_c|^2 (numpy's lstsq gives it: RMSE 8.0 on
+// Toy's test_interp). With Eigen's default pivot threshold LLS kept rounding residue as rank
+// and predicted with theta ~ 1e15 (RMSE 6e13).
+TEST(Bench, LeastSquaresOnConstantInputsIsTheMinimumNormFit) {
+  const std::string data = changed_scenario("toy_constant_x", "toy", [](Dataset& ds) {
+    for (auto& s : ds.splits)
+      if (s.name == "train") s.X.setConstant(3.0);
+  });
+  const Dataset ds = read_dataset(data);
+  const auto model = make_parametric_model(ds, ds.get("train"));
+  const Eigen::MatrixXd phi_train = model->stacked(ds.get("train").X);
+  const Eigen::VectorXd phi_c = phi_train.row(0).transpose();
+  const Eigen::VectorXd theta = phi_c * ds.get("train").Y.mean() / phi_c.squaredNorm();
+  const Split& test = ds.get("test_interp");
+  const Eigen::VectorXd err = model->stacked(test.X) * theta - test.Y.col(0);
+  const double expected = std::sqrt(err.squaredNorm() / static_cast<double>(test.rows()));
+
+  BenchOptions o;
+  o.data = data;
+  o.learners = {"LLS", "SVR", "LLS-prior"};
+  o.reps = 1;
+  o.out = (test::temp_dir("bench-constant") / "out").string();
+  const BenchReport r = run_bench(registry(), o);
+  EXPECT_TRUE(r.failed.empty()) << (r.failed.empty() ? "" : r.failed[0]);
+  auto rows = results_by_key(o.out);
+  EXPECT_NEAR(rows["test_interp/0/LLS"].rmse_mean, expected, 1e-6 * expected);
+  EXPECT_LT(expected, 20.0);   // ~8: the size of Toy's targets, not 6e13
+  EXPECT_LT(rows["test_interp/0/SVR"].rmse_mean, 20.0);
+}
+
+TEST(Bench, DataBeyondTheRangeOfSquaresIsRefused) {
+  for (const double scale : {1e200, 1e-300}) {
+    const std::string data = changed_scenario("toy_y_" + std::to_string(scale > 1 ? 200 : -300), "toy", [&](Dataset& ds) {
+      for (auto& s : ds.splits) s.Y *= scale;
+    });
+    BenchOptions o;
+    o.data = data;
+    o.learners = {"LLS"};
+    o.reps = 1;
+    o.out = (test::temp_dir("bench-scale") / "out").string();
+    try {
+      run_bench(registry(), o);
+      FAIL() << scale;
+    } catch (const DatasetError& e) {
+      EXPECT_NE(std::string(e.what()).find(data + ": split 'train': Y: column 'y' reaches at most |"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("outside [1e-150, 1e150]"), std::string::npos) << e.what();
+    }
+    EXPECT_FALSE(fs::exists(o.out));   // refused before anything is written
+  }
+}
+
+// A split or data file with a comma stays one field (RFC 4180 quotes) for compare and plot.
+TEST(Results, FieldsWithCommasAndQuotesRoundTrip) {
+  ResultRow row{"toy,v2", "test \"a,b\"", "LLS", 0, 1.5, 0, 1.5, 1.5, INFINITY, 0, INFINITY, INFINITY, 1, 0.25, "jitter 1e-9, retried"};
+  const fs::path file = test::temp_dir("results-quotes") / "results.csv";
+  std::ofstream(file) << results_header() << "\n" << results_line(row) << "\n";
+  const auto back = read_results(file.string());
+  ASSERT_EQ(back.size(), 1u);
+  EXPECT_EQ(back[0].scenario, "toy,v2");
+  EXPECT_EQ(back[0].split, "test \"a,b\"");
+  EXPECT_EQ(back[0].rmse_mean, 1.5);
+  EXPECT_EQ(back[0].fit_seconds, 0.25);
+  EXPECT_EQ(back[0].warnings, "jitter 1e-9; retried");
+  // Python's csv module (bench_plots.py) reads the same fields.
+  const auto py = test::run("/usr/bin/python3 -c \"import csv,sys; r=next(csv.DictReader(open(sys.argv[1]))); "
+                            "print(r['scenario'] + '|' + r['split'] + '|' + r['rmsemean'])\" " + file.string());
+  EXPECT_EQ(py.output, "toy,v2|test \"a,b\"|1.5\n");
+}
+
+TEST(Bench, MergeTakesEachUnitFromItsOwnShardAndRefusesAShardAsOutput) {
+  const fs::path dir = test::temp_dir("merge-stale");
+  BenchOptions o;
+  o.data = scenario_file("toy");
+  o.learners = {"LLS", "SVR"};   // unit 0 (LLS) is shard 1's, unit 1 (SVR) shard 2's
+  o.reps = 1;
+  o.shards = 2;
+  std::vector<std::string> shards;
+  for (int k = 1; k <= 2; ++k) {
+    BenchOptions s = o;
+    s.shard = k;
+    s.out = (dir / ("s" + std::to_string(k))).string();
+    run_bench(registry(), s);
+    shards.push_back(s.out);
+  }
+  // Shard 1's folder also holds a stale SVR unit, fitted on other data.
+  BenchOptions other = o;
+  other.shards = 1;
+  other.data = changed_scenario("toy_other_y", "toy", [](Dataset& ds) { for (auto& s : ds.splits) s.Y *= 2.0; });
+  other.out = (dir / "other").string();
+  run_bench(registry(), other);
+  fs::copy_file(other.out + "/units/SVR/rep0.h5", shards[0] + "/units/SVR/rep0.h5", fs::copy_options::overwrite_existing);
+
+  merge_bench(registry(), {shards[0], shards[1]}, (dir / "m12").string(), nullptr);
+  merge_bench(registry(), {shards[1], shards[0]}, (dir / "m21").string(), nullptr);
+  auto a = results_by_key((dir / "m12").string()), b = results_by_key((dir / "m21").string());
+  ASSERT_EQ(a.size(), 4u);
+  for (const auto& [key, r] : a) EXPECT_EQ(r.rmse_mean, b[key].rmse_mean) << key;
+  EXPECT_NE(a["test_interp/0/SVR"].rmse_mean, results_by_key(other.out)["test_interp/0/SVR"].rmse_mean);
+
+  const std::string before = [&] { std::ifstream in(shards[1] + "/bench.json"); return std::string(std::istreambuf_iterator<char>(in), {}); }();
+  try {
+    merge_bench(registry(), shards, shards[1], nullptr);
+    FAIL();
+  } catch (const LearnerError& e) {
+    EXPECT_NE(std::string(e.what()).find("merge: --out " + shards[1] + " is the shard folder"), std::string::npos) << e.what();
+  }
+  std::ifstream in(shards[1] + "/bench.json");
+  EXPECT_EQ(std::string(std::istreambuf_iterator<char>(in), {}), before);
+}
+
+// mj_id2name gives NULL for an unnamed joint: a force plugin created on one must refuse it,
+// naming the joint's index and type.
+TEST(ForcePlugins, UnnamedAndFreeJointsAreNamedByIndexAndType) {
+  const fs::path xml = test::temp_dir("unnamed-joints") / "m.xml";
+  std::ofstream(xml) << "<mujoco><worldbody><body><freejoint/><geom size=\"0.1\"/>"
+                        "<body pos=\"0 0 0.2\"><joint type=\"hinge\"/><geom size=\"0.1\"/></body></body></worldbody></mujoco>";
+  const ModelPtr m = load_mjcf(xml.string());
+  const auto* coulomb = static_cast<const spml_force_plugin*>(force_plugins().find("coulomb"));
+  ASSERT_NE(coulomb, nullptr);
+  const char* keys[] = {"fc"};
+  const char* values[] = {"1"};
+  char err[300] = {0};
+  for (const auto& [joint, message] : {std::pair<int, std::string>{0, "joint 0 (free, unnamed) is not a hinge or slide joint"},
+                                       {1, "joint 1 (hinge, unnamed) has no name"}}) {
+    err[0] = 0;
+    EXPECT_EQ(coulomb->create(m.get(), &joint, 1, keys, values, 1, err, sizeof err), nullptr);
+    EXPECT_NE(std::string(err).find(message), std::string::npos) << err;
+  }
+}

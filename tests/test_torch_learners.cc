@@ -17,6 +17,7 @@
 using spml::RowMatrix;
 using spml::torch_learners::BayesNet;
 using spml::torch_learners::BayesNetOptions;
+using spml::torch_learners::bayes_net_options;
 
 namespace {
 
@@ -112,7 +113,7 @@ TEST(Bnn, FitsToTheNoiseAndIsUnsureOutsideTheData) {
   const Sample train = draw(400, -2, 2, sigma, f, 1), inside = draw(400, -2, 2, sigma, f, 2),
                outside = draw(400, 4, 6, sigma, f, 3);
   for (const double kl_weight : {1e-3, 1e-2}) {
-    BayesNetOptions o;
+    BayesNetOptions o = bayes_net_options({}, 1, false, 0);   // the key table's defaults
     o.seed = 1;
     o.kl_weight = kl_weight;
     BayesNet net(o);
@@ -138,8 +139,7 @@ TEST(Bnn, FitsToTheNoiseAndIsUnsureOutsideTheData) {
 TEST(BaMbANN, RecoversTheModelCoefficients) {
   const double sigma = 0.1;
   const Sample train = draw(400, -2, 2, sigma, linear_model, 4), test = draw(400, -2, 2, sigma, linear_model, 5);
-  BayesNetOptions o;
-  o.model_path = true;
+  BayesNetOptions o = bayes_net_options({}, 1, true, 0);   // the key table's defaults
   o.seed = 2;
   BayesNet net(o);
   net.fit(train.x, train.y, train.phi, Eigen::VectorXd::Zero(4));   // started from zeros, as the paper's Toy
@@ -161,8 +161,7 @@ TEST(BaMbANN, LearnsAHiddenSmoothResidual) {
   const double sigma = 0.1;
   const auto f = [](double x) { return linear_model(x) + 0.5 * std::cos(5 * x); };
   const Sample train = draw(400, -2, 2, sigma, f, 6), test = draw(400, -2, 2, sigma, f, 7);
-  BayesNetOptions o;
-  o.model_path = true;
+  BayesNetOptions o = bayes_net_options({}, 1, true, 0);   // the key table's defaults
   o.seed = 3;
   BayesNet net(o);
   net.fit(train.x, train.y, train.phi, Eigen::VectorXd::Zero(4));
@@ -179,7 +178,7 @@ TEST(Bnn, SameSeedSameNumbersOtherSeedOtherNumbers) {
   const auto f = [](double x) { return std::sin(2 * x); };
   const Sample train = draw(100, -2, 2, 0.1, f, 8), query = draw(20, -3, 3, 0.1, f, 9);
   auto predict = [&](std::uint64_t seed) {
-    BayesNetOptions o;
+    BayesNetOptions o = bayes_net_options({}, 1, false, 0);   // the key table's defaults
     o.steps = 200;
     o.hidden = {16, 16};
     o.seed = seed;
@@ -196,7 +195,7 @@ TEST(Bnn, SameSeedSameNumbersOtherSeedOtherNumbers) {
 }
 
 TEST(Bnn, RefusesBadData) {
-  BayesNet net(BayesNetOptions{});
+  BayesNet net(bayes_net_options({}, 1, false, 0));
   RowMatrix x(3, 1), y(3, 1);
   x << 0, 1, 2;
   y << 0, NAN, 1;

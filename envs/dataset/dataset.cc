@@ -4,10 +4,14 @@
 #include <H5Cpp.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <cmath>
+#include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <vector>
 
 namespace spml {
 namespace {
@@ -225,8 +229,69 @@ void check_column_names(const std::vector<std::string>& columns, const std::stri
 }
 }  // namespace
 
+namespace {
+
+// Names and attributes are UTF-8 (the format says so, and JSON outputs need it).
+void check_utf8(const std::string& text, const std::string& where) {
+  if (const std::string why = utf8_problem(text); !why.empty()) throw DatasetError(where + ": " + why);
+}
+
+void check_names_utf8(const Dataset& ds, const std::string& where) {
+  for (const auto& [k, v] : ds.provenance) {
+    check_utf8(k, where + ": a root attribute name");
+    check_utf8(v, where + ": root attribute '" + k + "'");
+  }
+  for (const Split& s : ds.splits) {
+    check_utf8(s.name, where + ": a split name");
+    for (const auto& c : s.x_columns) check_utf8(c, where + ": group " + quote(s.name) + ": dataset 'X': attribute 'columns'");
+    for (const auto& c : s.y_columns) check_utf8(c, where + ": group " + quote(s.name) + ": dataset 'Y': attribute 'columns'");
+  }
+  const ModelInfo& m = ds.model;
+  for (const auto* text : {&m.name, &m.mjcf_path, &m.mjcf_xml}) check_utf8(*text, where + ": group 'model'");
+  for (const auto& n : m.param_names) check_utf8(n, where + ": group 'model': attribute 'param_names'");
+}
+
+// Rows are in time order: every consumer that looks at time (hold-outs, rollouts, filters)
+// takes the array order for it.
+void check_time_order(const Split& s, const std::string& where) {
+  for (Eigen::Index i = 1; i < s.t.size(); ++i)
+    if (s.t[i] < s.t[i - 1]) {
+      std::ostringstream msg;
+      msg << where << ": dataset 't': rows are not in time order (row " << i << ": t = " << s.t[i] << " after t = "
+          << s.t[i - 1] << "); sort the rows by time";
+      throw DatasetError(msg.str());
+    }
+}
+
+}  // namespace
+
+std::string utf8_problem(const std::string& text) {
+  const auto* b = reinterpret_cast<const unsigned char*>(text.data());
+  const size_t n = text.size();
+  for (size_t i = 0; i < n;) {
+    const unsigned c = b[i];
+    size_t len = c < 0x80 ? 1 : (c >> 5) == 0x6 ? 2 : (c >> 4) == 0xE ? 3 : (c >> 3) == 0x1E ? 4 : 0;
+    bool ok = len > 0 && i + len <= n && !(len == 2 && c < 0xC2) && !(len == 4 && c > 0xF4);
+    for (size_t k = 1; ok && k < len; ++k) ok = (b[i + k] >> 6) == 0x2;
+    if (ok && len == 3) {
+      const unsigned c1 = b[i + 1];
+      ok = !(c == 0xE0 && c1 < 0xA0) && !(c == 0xED && c1 >= 0xA0);   // overlong, surrogates
+    }
+    if (ok && len == 4) ok = !(c == 0xF0 && b[i + 1] < 0x90) && !(c == 0xF4 && b[i + 1] >= 0x90);
+    if (!ok) {
+      char hex[8];
+      std::snprintf(hex, sizeof hex, "0x%02x", c);
+      return "not valid UTF-8 (byte " + std::string(hex) + " at offset " + std::to_string(i) + " of '" +
+             text.substr(0, std::min<size_t>(i, 40)) + "...')";
+    }
+    i += len;
+  }
+  return "";
+}
+
 void validate(const Dataset& ds, const std::string& where, const ReadOptions& options) {
   if (ds.splits.empty()) throw DatasetError(where + ": contains no split groups");
+  check_names_utf8(ds, where);
   for (size_t i = 0; i < ds.splits.size(); ++i)
     for (size_t j = 0; j < i; ++j)
       if (ds.splits[i].name == ds.splits[j].name)
@@ -257,6 +322,7 @@ void validate(const Dataset& ds, const std::string& where, const ReadOptions& op
       check_finite(s.Y, s.y_columns, g + ": dataset 'Y'");
       if (s.t.size()) check_finite(RowMatrix(s.t), {"t"}, g + ": dataset 't'");
     }
+    check_time_order(s, g);
   }
   const ModelInfo& m = ds.model;
   const auto M = static_cast<Eigen::Index>(m.param_names.size());
@@ -266,7 +332,7 @@ void validate(const Dataset& ds, const std::string& where, const ReadOptions& op
 }
 
 Dataset read_dataset(const std::string& path, const ReadOptions& options) {
-  H5::Exception::dontPrint();
+  quiet_hdf5();
   if (!fs::exists(path)) throw DatasetError(path + ": no such file");
   if (fs::is_directory(path)) throw DatasetError(path + ": is a directory, not a dataset file");
   htri_t is_hdf5 = H5Fis_hdf5(path.c_str());
@@ -332,31 +398,72 @@ Dataset read_dataset(const std::string& path, const ReadOptions& options) {
 
 namespace {
 
-// Creates `path` atomically: `body` fills a temporary HDF5 file that is renamed into place.
-template <class Body>
-void write_h5_atomic(const std::string& path, Body body) {
-  H5::Exception::dontPrint();
+// Where an output cannot go, named as the user gave it (not as the temporary file).
+void check_output_path(const std::string& path) {
   fs::path target(path);
+  if (fs::is_directory(target)) throw DatasetError(path + ": is a directory; give a file name to write");
   if (target.has_parent_path() && !fs::exists(target.parent_path()))
     throw DatasetError(path + ": directory " + target.parent_path().string() + " does not exist");
+}
+
+// Writes `bytes` to `tmp` and renames it to `path`; a failed write (disk full) removes `tmp`.
+void write_bytes_atomic(const std::string& path, const std::string& tmp, const char* bytes, size_t size) {
+  std::error_code ec;
+  {
+    std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
+    if (f) f.write(bytes, static_cast<std::streamsize>(size));
+    f.close();
+    if (!f) {
+      const int err = errno;
+      fs::remove(tmp, ec);
+      throw DatasetError(path + ": write failed (" + std::string(err ? std::strerror(err) : "disk full or no permission?") + ")");
+    }
+  }
+  fs::rename(tmp, path, ec);
+  if (ec) {
+    std::error_code rm;
+    fs::remove(tmp, rm);
+    throw DatasetError(path + ": cannot move the finished file into place: " + ec.message());
+  }
+}
+
+// Creates `path` atomically: `body` fills an HDF5 file held in memory (the core driver, no
+// backing store), whose image is then written to a temporary file and renamed into place.
+// HDF5 itself never meets a full disk: when it did, its close failed, the file stayed
+// registered, and closing it again at exit crashed the process inside the library.
+template <class Body>
+void write_h5_atomic(const std::string& path, Body body) {
+  quiet_hdf5();
+  check_output_path(path);
   const std::string tmp = path + ".tmp-" + std::to_string(::getpid());
+  // Track creation order so groups read back in the order they were written.
+  const hid_t fcpl = H5Pcreate(H5P_FILE_CREATE), fapl = H5Pcreate(H5P_FILE_ACCESS);
+  H5Pset_link_creation_order(fcpl, H5P_CRT_ORDER_TRACKED | H5P_CRT_ORDER_INDEXED);
+  H5Pset_fapl_core(fapl, 1 << 20, 0);
+  const hid_t fid = H5Fcreate(tmp.c_str(), H5F_ACC_TRUNC, fcpl, fapl);
+  H5Pclose(fcpl);
+  H5Pclose(fapl);
+  if (fid < 0) throw DatasetError(path + ": HDF5 cannot create a file in memory");
+  std::vector<char> image;
   try {
-    // Track creation order so groups read back in the order they were written.
-    H5::FileCreatPropList fcpl;
-    H5Pset_link_creation_order(fcpl.getId(), H5P_CRT_ORDER_TRACKED | H5P_CRT_ORDER_INDEXED);
-    H5::H5File file(tmp, H5F_ACC_TRUNC, fcpl);
-    body(file);
-    file.close();
-    fs::rename(tmp, path);
+    {
+      H5::H5File file(fid);   // a reference of its own: its destructor leaves fid open
+      body(file);
+    }
+    H5Fflush(fid, H5F_SCOPE_GLOBAL);
+    const ssize_t size = H5Fget_file_image(fid, nullptr, 0);
+    if (size < 0) throw DatasetError(path + ": HDF5 cannot produce the file's image");
+    image.resize(static_cast<size_t>(size));
+    if (H5Fget_file_image(fid, image.data(), image.size()) != size) throw DatasetError(path + ": HDF5 cannot produce the file's image");
   } catch (const H5::Exception& e) {
-    std::error_code ec;
-    fs::remove(tmp, ec);
+    H5Fclose(fid);
     throw DatasetError(path + ": write failed: " + e.getDetailMsg());
   } catch (...) {
-    std::error_code ec;
-    fs::remove(tmp, ec);
+    H5Fclose(fid);
     throw;
   }
+  H5Fclose(fid);
+  write_bytes_atomic(path, tmp, image.data(), image.size());
 }
 
 // Opens (creating as needed) the group holding "a/b/name" and returns it.
@@ -428,7 +535,7 @@ void write_matrix_file(const std::string& path, const MatrixFile& mf) {
 }
 
 MatrixFile read_matrix_file(const std::string& path) {
-  H5::Exception::dontPrint();
+  quiet_hdf5();
   MatrixFile out;
   try {
     H5::H5File file(path, H5F_ACC_RDONLY);
@@ -445,18 +552,14 @@ MatrixFile read_matrix_file(const std::string& path) {
 }
 
 void write_text_atomic(const std::string& path, const std::string& content) {
-  const std::string tmp = path + ".tmp-" + std::to_string(::getpid());
-  {
-    std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
-    f << content;
-    f.close();
-    if (!f) {
-      std::error_code ec;
-      fs::remove(tmp, ec);
-      throw DatasetError(path + ": write failed");
-    }
-  }
-  fs::rename(tmp, path);
+  check_output_path(path);
+  write_bytes_atomic(path, path + ".tmp-" + std::to_string(::getpid()), content.data(), content.size());
+}
+
+void quiet_hdf5() {
+  // HDF5 prints its whole error stack (dozens of HDF5-DIAG lines) before spml's own message;
+  // every HDF5 failure is reported by spml instead.
+  H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
 }
 
 }  // namespace spml

@@ -1,6 +1,7 @@
 #include "spml/import.h"
 
 #include "spml/csv.h"
+#include "spml/matrix_file.h"
 #include "spml/parse.h"
 #include "spml/signal.h"
 
@@ -58,9 +59,42 @@ Eigen::VectorXd resolve_column(const Table& table, const std::string& spec, std:
   if (eq == std::string::npos) name = rhs;
   for (size_t i = 0; i < table.names.size(); ++i)
     if (table.names[i] == rhs) return table.columns[i] * factor;
-  std::string have;
+  std::string have, other;
   for (const auto& n : table.names) have += (have.empty() ? "" : ", ") + n;
-  fail(table.source + ": no column '" + rhs + "' (available: " + have + ")");
+  for (const auto& n : table.left_out) other += (other.empty() ? "" : ", ") + n;
+  fail(table.source + ": no column '" + rhs + "' (available: " + have + ")" +
+       (other.empty() ? "" : "; vectors of another length, not columns: " + other));
+}
+
+// The cells of one CSV line (RFC 4180 quoting: a cell in double quotes may hold commas, and
+// "" inside it is one quote); unquoted cells are trimmed of surrounding spaces.
+std::vector<std::string> csv_cells(const std::string& line, const std::string& where) {
+  std::vector<std::string> cells;
+  size_t i = 0;
+  while (true) {
+    while (i < line.size() && (line[i] == ' ' || line[i] == '\t')) ++i;
+    std::string cell;
+    if (i < line.size() && line[i] == '"') {
+      for (++i;; ++i) {
+        if (i >= line.size()) fail(where + ": a quoted cell is not closed (missing '\"')");
+        if (line[i] == '"' && i + 1 < line.size() && line[i + 1] == '"') cell += line[i++];
+        else if (line[i] == '"') break;
+        else cell += line[i];
+      }
+      ++i;
+      while (i < line.size() && (line[i] == ' ' || line[i] == '\t')) ++i;
+      if (i < line.size() && line[i] != ',') fail(where + ": text after the closing quote of cell " + std::to_string(cells.size() + 1));
+    } else {
+      const size_t comma = line.find(',', i);
+      cell = line.substr(i, comma == std::string::npos ? std::string::npos : comma - i);
+      const auto e = cell.find_last_not_of(" \t");
+      cell = e == std::string::npos ? "" : cell.substr(0, e + 1);
+      i = comma == std::string::npos ? line.size() : comma;
+    }
+    cells.push_back(std::move(cell));
+    if (i >= line.size()) return cells;
+    ++i;   // the comma
+  }
 }
 
 }  // namespace
@@ -78,6 +112,7 @@ CsvText read_csv(const std::string& path) {
   if (content.rfind("\x89HDF\r\n\x1a\n", 0) == 0)
     fail(path + ": is an HDF5 file, not CSV text (import reads CSV or .mat; spml/1 files need no import)");
   if (content.find('\0') != std::string::npos) fail(path + ": is a binary file, not CSV text");
+  if (content.rfind("\xEF\xBB\xBF", 0) == 0) content.erase(0, 3);   // a UTF-8 byte order mark is not part of the first name
   CsvText t;
   t.source = path;
   std::istringstream lines(content);
@@ -87,8 +122,8 @@ CsvText read_csv(const std::string& path) {
     ++lineno;
     if (!line.empty() && line.back() == '\r') line.pop_back();
     if (line.find_first_not_of(" \t") == std::string::npos) continue;
-    auto cells = split_list(line);
     const std::string where = path + ":" + std::to_string(lineno);
+    auto cells = csv_cells(line, where);
     if (t.header.empty()) {
       for (size_t i = 0; i < cells.size(); ++i) {
         if (cells[i].empty()) fail(where + ": header column " + std::to_string(i + 1) + " has no name");
@@ -125,44 +160,116 @@ Table read_csv_table(const std::string& path) {
   return t;
 }
 
-Table read_mat_table(const std::string& path) {
-  mat_t* mat = Mat_Open(path.c_str(), MAT_ACC_RDONLY);
-  if (!mat) fail(path + ": not a readable MATLAB .mat file");
-  Table t;
-  t.source = path;
+namespace {
+
+// Element i of a numeric matio variable as a double (every real class MATLAB writes).
+template <class T>
+double element(const matvar_t* var, size_t i) {
+  return static_cast<double>(static_cast<const T*>(var->data)[i]);
+}
+
+bool mat_value(const matvar_t* var, size_t i, double& v) {
+  switch (var->data_type) {
+    case MAT_T_DOUBLE: v = element<double>(var, i); return true;
+    case MAT_T_SINGLE: v = element<float>(var, i); return true;
+    case MAT_T_INT8: v = element<int8_t>(var, i); return true;
+    case MAT_T_UINT8: v = element<uint8_t>(var, i); return true;
+    case MAT_T_INT16: v = element<int16_t>(var, i); return true;
+    case MAT_T_UINT16: v = element<uint16_t>(var, i); return true;
+    case MAT_T_INT32: v = element<int32_t>(var, i); return true;
+    case MAT_T_UINT32: v = element<uint32_t>(var, i); return true;
+    case MAT_T_INT64: v = element<int64_t>(var, i); return true;
+    case MAT_T_UINT64: v = element<uint64_t>(var, i); return true;
+    default: return false;
+  }
+}
+
+// The real numeric vectors and scalars of a .mat file, by name, in file order.
+std::vector<std::pair<std::string, Eigen::VectorXd>> mat_vectors(mat_t* mat, const std::string& path) {
   std::vector<std::pair<std::string, Eigen::VectorXd>> vectors;
   matvar_t* var;
   while ((var = Mat_VarReadNext(mat)) != nullptr) {
-    bool numeric = var->class_type == MAT_C_DOUBLE || var->class_type == MAT_C_SINGLE ||
-                   (var->class_type >= MAT_C_INT8 && var->class_type <= MAT_C_UINT64);
-    if (numeric && var->rank == 2 && !var->isComplex && var->data) {
-      size_t n = var->dims[0] * var->dims[1];
-      if (var->dims[0] == 1 || var->dims[1] == 1) {
-        Eigen::VectorXd v(static_cast<Eigen::Index>(n));
-        for (size_t i = 0; i < n; ++i) {
-          switch (var->data_type) {
-            case MAT_T_DOUBLE: v[i] = static_cast<const double*>(var->data)[i]; break;
-            case MAT_T_SINGLE: v[i] = static_cast<const float*>(var->data)[i]; break;
-            case MAT_T_INT32: v[i] = static_cast<const int32_t*>(var->data)[i]; break;
-            case MAT_T_UINT8: v[i] = static_cast<const uint8_t*>(var->data)[i]; break;
-            default: v[i] = std::nan("");
-          }
+    const bool numeric = var->class_type == MAT_C_DOUBLE || var->class_type == MAT_C_SINGLE ||
+                         (var->class_type >= MAT_C_INT8 && var->class_type <= MAT_C_UINT64);
+    if (numeric && var->rank == 2 && !var->isComplex && var->data && (var->dims[0] == 1 || var->dims[1] == 1)) {
+      const size_t n = var->dims[0] * var->dims[1];
+      Eigen::VectorXd v(static_cast<Eigen::Index>(n));
+      for (size_t i = 0; i < n; ++i)
+        if (!mat_value(var, i, v[static_cast<Eigen::Index>(i)])) {
+          const std::string name = var->name ? var->name : "?", type = std::to_string(static_cast<int>(var->data_type));
+          Mat_VarFree(var);
+          fail(path + ": variable '" + name + "': numeric data type " + type + " is not supported");
         }
-        if (n == 1) t.scalars[var->name] = v[0];
-        vectors.emplace_back(var->name, v);
-      }
+      vectors.emplace_back(var->name ? var->name : "", v);
     }
     Mat_VarFree(var);
   }
+  return vectors;
+}
+
+// matio reads a truncated v5 file without complaint (the last variables then hold whatever
+// was there). Its top-level elements are walked here instead: a 128-byte header, then per
+// variable an 8-byte tag (type, byte count) and the data, padded to 8 bytes unless compressed.
+void check_mat5_complete(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::vector<unsigned char> b((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (b.size() < 128) fail(path + ": truncated .mat file (" + std::to_string(b.size()) + " bytes, shorter than its header)");
+  const bool swapped = b[126] == 'M' && b[127] == 'I';   // written on a machine of the other byte order
+  auto u32 = [&](size_t at) {
+    uint32_t v = 0;
+    for (int k = 0; k < 4; ++k) v |= static_cast<uint32_t>(b[at + static_cast<size_t>(swapped ? 3 - k : k)]) << (8 * k);
+    return v;
+  };
+  constexpr uint32_t kCompressed = 15;
+  for (size_t at = 128, index = 1; at < b.size(); ++index) {
+    if (b.size() - at < 8) fail(path + ": truncated .mat file (variable " + std::to_string(index) + " has no complete tag)");
+    const uint32_t type = u32(at), bytes = u32(at + 4);
+    size_t next = at + 8 + bytes;
+    if (type != kCompressed) next += (8 - bytes % 8) % 8;
+    if (next > b.size() + (type != kCompressed ? 7 : 0))
+      fail(path + ": truncated .mat file (variable " + std::to_string(index) + " needs " + std::to_string(next) +
+           " bytes, the file has " + std::to_string(b.size()) + ")");
+    at = next;
+  }
+}
+
+}  // namespace
+
+Table read_mat_table(const std::string& path) {
+  quiet_hdf5();   // matio reads v7.3 files through HDF5, which would print its error stack
+  mat_t* mat = Mat_Open(path.c_str(), MAT_ACC_RDONLY);
+  if (!mat) fail(path + ": not a readable MATLAB .mat file");
+  if (Mat_GetVersion(mat) == MAT_FT_MAT5) {
+    try {
+      check_mat5_complete(path);
+    } catch (...) {
+      Mat_Close(mat);
+      throw;
+    }
+  }
+  Table t;
+  t.source = path;
+  std::vector<std::pair<std::string, Eigen::VectorXd>> vectors;
+  try {
+    vectors = mat_vectors(mat, path);
+  } catch (...) {
+    Mat_Close(mat);
+    throw;
+  }
   Mat_Close(mat);
-  // Columns are the vectors of the most common length (the records); others stay scalars.
+  for (auto& [n, v] : vectors)
+    if (v.size() == 1) t.scalars[n] = v[0];
+  // Columns are the vectors of the most common length (the records; on a tie the longer
+  // ones); the other vectors are left out and named when a column is not found.
   std::map<Eigen::Index, int> count;
   for (auto& [n, v] : vectors) if (v.size() > 1) count[v.size()]++;
   Eigen::Index len = 0;
   int best = 0;
-  for (auto& [l, c] : count) if (c > best) { best = c; len = l; }
-  for (auto& [n, v] : vectors)
+  for (auto& [l, c] : count) if (c >= best) { best = c; len = l; }
+  for (auto& [n, v] : vectors) {
     if (v.size() == len) { t.names.push_back(n); t.columns.push_back(v); }
+    else if (v.size() > 1) t.left_out.push_back(n + " (" + std::to_string(v.size()) + " samples)");
+  }
   if (t.names.empty()) fail(path + ": no numeric vector variables found");
   return t;
 }
@@ -192,6 +299,45 @@ std::vector<std::string> expand_names(const std::string& list) {
   return out;
 }
 
+namespace {
+
+// The numbers of one text log, read line by line: every non-blank line must hold the same
+// count as the first (a sample per line, a value per line, or whole samples per line), so a
+// short row followed by a long one cannot shift values between columns.
+std::vector<double> read_log_values(const std::string& file, size_t k, const std::string& names) {
+  std::ifstream in(file, std::ios::binary);
+  if (!in) fail(file + ": cannot open");
+  std::vector<double> values;
+  std::string line, word;
+  size_t lineno = 0, width = 0, first_line = 0;
+  while (std::getline(in, line)) {
+    ++lineno;
+    std::istringstream words(line);
+    size_t count = 0;
+    while (words >> word) {
+      const auto v = parse_number(word);
+      if (!v) fail(file + ":" + std::to_string(lineno) + ": '" + word + "' is not a finite number");
+      values.push_back(*v);
+      ++count;
+    }
+    if (count == 0) continue;
+    if (width == 0) {
+      width = count;
+      first_line = lineno;
+      if (width % k != 0 && k % width != 0)
+        fail(file + ":" + std::to_string(lineno) + ": " + std::to_string(width) + " values on a line, but a sample has " +
+             std::to_string(k) + " (" + names + "): neither whole samples nor whole parts of one");
+    } else if (count != width) {
+      fail(file + ":" + std::to_string(lineno) + ": " + std::to_string(count) + " values, but line " +
+           std::to_string(first_line) + " and those after it hold " + std::to_string(width) + " (a ragged log; " +
+           "a sample has " + std::to_string(k) + ": " + names + ")");
+    }
+  }
+  return values;
+}
+
+}  // namespace
+
 Table read_text_logs(const std::vector<std::string>& specs) {
   Table t;
   for (const auto& spec : specs) {
@@ -199,16 +345,11 @@ Table read_text_logs(const std::vector<std::string>& specs) {
     if (eq == std::string::npos || eq == 0) fail("--text '" + spec + "': expected FILE=NAMES");
     const std::string file = spec.substr(0, eq);
     const std::vector<std::string> names = expand_names(spec.substr(eq + 1));
-    std::ifstream in(file, std::ios::binary);
-    if (!in) fail(file + ": cannot open");
-    std::vector<double> values;
-    std::string word;
-    while (in >> word) {
-      const auto v = parse_number(word);
-      if (!v) fail(file + ": value " + std::to_string(values.size() + 1) + ": '" + word + "' is not a finite number");
-      values.push_back(*v);
-    }
+    for (const auto& n : names)
+      if (n.empty()) fail("--text '" + spec + "': " + file + ": empty column name (expected FILE=NAME,NAME,...)");
+    if (names.empty()) fail("--text '" + spec + "': " + file + ": no column names after '=' (expected FILE=NAME,NAME,...)");
     const size_t k = names.size();
+    const std::vector<double> values = read_log_values(file, k, join_list(names));
     if (values.empty() || values.size() % k != 0)
       fail(file + ": " + std::to_string(values.size()) + " values are not a whole number of samples of " +
            std::to_string(k) + " (" + join_list(names) + ")");
@@ -230,6 +371,25 @@ Table read_text_logs(const std::vector<std::string>& specs) {
 
 namespace {
 
+// The uniform grid with step dt over t's span. A time stamp far off the others (one stray
+// t = 1e5 in a 10 s log) would make millions of interpolated rows: refused beyond twice the
+// rows measured, naming the largest gap.
+Eigen::VectorXd uniform_grid(const Eigen::VectorXd& t, double dt, const std::string& source) {
+  const double span = (t[t.size() - 1] - t[0]) / dt;
+  if (!(span + 1 <= 2.0 * static_cast<double>(t.size()))) {
+    Eigen::Index gap = 1;
+    for (Eigen::Index i = 2; i < t.size(); ++i)
+      if (t[i] - t[i - 1] > t[gap] - t[gap - 1]) gap = i;
+    std::ostringstream msg;
+    msg << source << ": time stamps: interpolating onto the median step " << dt << " s would make " << span + 1
+        << " rows from " << t.size() << " (the largest gap: row " << gap << ", t = " << t[gap - 1] << " -> " << t[gap]
+        << " s); is a time stamp wrong?";
+    fail(msg.str());
+  }
+  const auto n = static_cast<Eigen::Index>(std::floor(span)) + 1;
+  return Eigen::VectorXd::LinSpaced(n, t[0], t[0] + dt * static_cast<double>(n - 1));
+}
+
 // Steps 1-5 of Conditioning on the chosen columns (in place), with the time column.
 void condition(const Conditioning& c, const std::string& source, Eigen::VectorXd& t, std::vector<Eigen::VectorXd>& xs,
                std::vector<std::string>& xn, std::vector<Eigen::VectorXd>& ys) {
@@ -239,13 +399,18 @@ void condition(const Conditioning& c, const std::string& source, Eigen::VectorXd
     if (!(t[i] > t[i - 1])) fail(source + ": time stamps must increase; row " + std::to_string(i) + " does not");
   const double dt = median_step(t);
   if (uneven_steps(t)) {
-    const auto n = static_cast<Eigen::Index>(std::floor((t[t.size() - 1] - t[0]) / dt)) + 1;
-    const Eigen::VectorXd grid = Eigen::VectorXd::LinSpaced(n, t[0], t[0] + dt * static_cast<double>(n - 1));
+    const Eigen::VectorXd grid = uniform_grid(t, dt, source);
     for (auto* cols : {&xs, &ys})
       for (auto& col : *cols) col = interpolate(t, col, grid);
     t = grid;
   }
   if (c.lowpass_hz > 0) {
+    if (!(c.lowpass_hz < 0.5 / dt)) {
+      std::ostringstream msg;
+      msg << source << ": --lowpass " << c.lowpass_hz << " Hz: the cut-off must lie below half the sampling rate, "
+          << 0.5 / dt << " Hz (the time column's median step is " << dt << " s)";
+      fail(msg.str());
+    }
     const auto sos = butterworth_lowpass(c.filter_order, c.lowpass_hz, 1.0 / dt);
     for (auto* cols : {&xs, &ys})
       for (auto& col : *cols) col = filtfilt(sos, col);
@@ -279,6 +444,21 @@ void condition(const Conditioning& c, const std::string& source, Eigen::VectorXd
     for (auto& col : *cols) keep(col);
 }
 
+// The source column of a spec ("name=source*factor" -> "source").
+std::string source_of(const std::string& spec) {
+  std::string rhs = spec.substr(spec.find('=') == std::string::npos ? 0 : spec.find('=') + 1);
+  return rhs.substr(0, rhs.find('*'));
+}
+
+// A column that is both an input and a target would hand the learners the answer.
+void check_no_target_leak(const Table& table, const ImportSpec& spec) {
+  for (const auto& y : spec.y)
+    for (const auto& x : spec.x)
+      if (source_of(x) == source_of(y))
+        fail(table.source + ": column '" + source_of(y) + "' is both an input (--x " + x + ") and a target (--y " + y +
+             "): the target would leak into the inputs");
+}
+
 }  // namespace
 
 Dataset table_to_dataset(const Table& table, const ImportSpec& spec) {
@@ -288,8 +468,19 @@ Dataset table_to_dataset(const Table& table, const ImportSpec& spec) {
   std::vector<std::string> xn, yn;
   for (const auto& s : spec.x) { std::string n; xs.push_back(resolve_column(table, s, n)); xn.push_back(n); }
   for (const auto& s : spec.y) { std::string n; ys.push_back(resolve_column(table, s, n)); yn.push_back(n); }
+  check_no_target_leak(table, spec);
   Eigen::VectorXd tcol;
-  if (!spec.t.empty()) { std::string n; tcol = resolve_column(table, spec.t, n); }
+  if (!spec.t.empty()) {
+    std::string n;
+    tcol = resolve_column(table, spec.t, n);
+    for (Eigen::Index i = 1; i < tcol.size(); ++i)
+      if (tcol[i] < tcol[i - 1]) {
+        std::ostringstream msg;
+        msg << table.source << ": column '" << spec.t << "': rows are not in time order (data row " << i + 1 << ": t = "
+            << tcol[i] << " after t = " << tcol[i - 1] << "); sort the rows by time before importing";
+        fail(msg.str());
+      }
+  }
   condition(spec.conditioning, table.source, tcol, xs, xn, ys);
   const Eigen::Index N = xs.front().size();
   std::vector<SplitRange> ranges = spec.splits;

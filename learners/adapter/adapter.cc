@@ -1,4 +1,5 @@
 // Config parsing and model checks shared by the learner libraries (learner_adapter.h).
+#include <cmath>
 #include <stdexcept>
 
 #include "spml/learner_adapter.h"
@@ -10,6 +11,12 @@ Config::Config(const spml_learner_config* c) {
   if (!c) return;
   seed = c->seed;
   for (int32_t i = 0; i < c->count; ++i) values[c->keys[i]] = c->values[i];
+}
+
+double Config::number(const std::string& key) const {
+  if (values.find(key) == values.end())
+    throw std::runtime_error("config '" + key + "' is missing (the host fills every default in from the learner's key table)");
+  return number(key, 0.0);
 }
 
 double Config::number(const std::string& key, double fallback) const {
@@ -26,6 +33,29 @@ void require_model(const View& data, const spml_learner_model& model, const char
   if (model.params != data.phi.cols())
     throw std::runtime_error(std::string(learner) + ": model lists " + std::to_string(model.params) +
                              " parameters, the regressor has " + std::to_string(data.phi.cols()) + " columns");
+}
+
+}  // namespace spml::adapter
+
+namespace spml::adapter {
+
+void require_finite_training_data(const View& train) {
+  auto first_bad = [](const ConstRowMap& a, const char* what) {
+    for (Eigen::Index i = 0; i < a.rows(); ++i)
+      for (Eigen::Index j = 0; j < a.cols(); ++j)
+        if (!std::isfinite(a(i, j)))
+          throw std::runtime_error(std::string("training ") + what + " holds a non-finite value (row " + std::to_string(i) +
+                                   ", column " + std::to_string(j) + "): refused");
+  };
+  first_bad(train.X, "X");
+  first_bad(train.Y, "Y");
+  first_bad(train.phi, "regressor");
+}
+
+void require_query_like_fit(const View& query, Eigen::Index inputs, Eigen::Index outputs) {
+  if (query.X.cols() != inputs || query.outputs != outputs)
+    throw std::runtime_error("query has " + std::to_string(query.X.cols()) + " inputs and " + std::to_string(query.outputs) +
+                             " outputs, the fit had " + std::to_string(inputs) + " and " + std::to_string(outputs));
 }
 
 }  // namespace spml::adapter

@@ -20,16 +20,17 @@ class GaussianProcess : public Learner {
  public:
   void fit(const View& d, const spml_learner_model& model, const Config& config) override {
     if (kMean != MeanStart::kNone) require_model(d, model, "SPGP");
+    // Every value comes from the key table's defaults or the user (the host fills them in).
     gp::FitOptions options;
-    options.max_evals = static_cast<int>(config.number("max_evals", options.max_evals));
-    options.noise_floor = config.number("noise_floor", options.noise_floor);
+    options.max_evals = static_cast<int>(config.number("max_evals"));
+    options.noise_floor = config.number("noise_floor");
     options.learn_mean = kMean != MeanStart::kNone;
-    options.subset_rows = static_cast<int>(config.number("subset_rows", 1000));
-    options.final_evals = static_cast<int>(config.number("final_evals", options.final_evals));
+    options.subset_rows = static_cast<int>(config.number("subset_rows"));
+    if (!kSparse) options.final_evals = static_cast<int>(config.number("final_evals"));
     // Holding theta at zeros or ones while the kernel is fitted would hand the whole model to
     // the kernel; only a prior is a start worth fitting the kernel around.
-    options.kernel_first = kMean == MeanStart::kPrior && config.number("kernel_first", 1.0) != 0.0;
-    const bool standardize = config.number("standardize", 1.0) != 0.0;
+    options.kernel_first = kMean == MeanStart::kPrior && config.number("kernel_first") != 0.0;
+    const bool standardize = config.number("standardize") != 0.0;
     if (options.max_evals < 1) throw std::runtime_error("max_evals must be >= 1");
     if (!(options.noise_floor > 0)) throw std::runtime_error("noise_floor must be > 0");
 
@@ -57,7 +58,7 @@ class GaussianProcess : public Learner {
       if (M > 0) phi = kSeparate ? Eigen::MatrixXd(d.phi.middleRows(g * n, n)) : Eigen::MatrixXd(d.phi);
       auto lik = std::make_unique<gp::Likelihood>(X, std::move(Y), std::move(phi));
       if (kSparse) {
-        const int inducing = static_cast<int>(config.number("inducing", 500));
+        const int inducing = static_cast<int>(config.number("inducing"));
         if (inducing < 1) throw std::runtime_error("inducing must be >= 1");
         // The kernel from the exact (semi-parametric) fit on a strided subset; then the sparse
         // posterior over all rows, with theta maximising its bound.

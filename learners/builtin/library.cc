@@ -20,8 +20,4 @@ const std::vector<spml_learner>& all() {
 
 }  // namespace spml::builtin
 
-extern "C" SPML_EXPORT int32_t spml_learner_abi_version(void) { return SPML_LEARNER_ABI_VERSION; }
-
-extern "C" SPML_EXPORT const spml_learner* spml_learner_get(int32_t index) {
-  return spml::adapter::learner_at(spml::builtin::all(), index);
-}
+SPML_EXPORT_LEARNERS(spml::builtin::all().data(), spml::builtin::all().size())

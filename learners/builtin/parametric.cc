@@ -3,8 +3,12 @@
 #include <linear.h>
 
 #include <Eigen/Dense>
+#include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <stdexcept>
+#include <tuple>
+#include <utility>
 #include <vector>
 
 #include "learners.h"
@@ -14,8 +18,15 @@ namespace {
 
 // Least squares on the stacked regressor. The complete orthogonal decomposition gives the
 // minimum-norm solution when the data do not excite every parameter (rank-deficient phi).
+// Pivots below eps * max(rows, cols) of the largest count as zero, LAPACK's (and numpy's
+// lstsq) rule: Eigen's default, eps * min(rows, cols), kept the rounding residue of
+// proportional columns (constant X) as a direction, and theta came out ~1e15 (RMSE 6e13
+// where the minimum-norm fit gives 8.0).
 Eigen::VectorXd least_squares(const View& d, Eigen::Index* rank) {
-  Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(Eigen::MatrixXd(d.phi));
+  const Eigen::MatrixXd A(d.phi);
+  Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod;
+  cod.setThreshold(Eigen::NumTraits<double>::epsilon() * static_cast<double>(std::max(A.rows(), A.cols())));
+  cod.compute(A);
   *rank = cod.rank();
   return cod.solve(stacked_targets(d.Y));
 }
@@ -79,17 +90,52 @@ class FixedCoefficients : public LinearModel {
 // Defaults after Cherkassky & Ma (2004):
 //   C = max(|mean(y) + 3 std(y)|, |mean(y) - 3 std(y)|)
 //   epsilon = 3 sigma sqrt(ln(n) / n), sigma = RMS residual of the least-squares fit.
+// liblinear's L2-regularised L1-loss SVR on the features F (n x K) with an intercept:
+// returns w (K) and the bias. Features are scaled to unit RMS for the solver and w back.
+std::pair<Eigen::VectorXd, double> linear_svr(const Eigen::MatrixXd& F, const Eigen::VectorXd& y, double C,
+                                              double epsilon, double tolerance) {
+  const Eigen::Index n = F.rows(), K = F.cols();
+  Eigen::VectorXd scale(K);
+  for (Eigen::Index j = 0; j < K; ++j) {
+    const double rms = std::sqrt(F.col(j).squaredNorm() / static_cast<double>(n));
+    scale[j] = rms > 0 ? 1.0 / rms : 1.0;
+  }
+  // Row i: K features, the intercept feature (index K + 1, value 1) and the terminator.
+  const Eigen::Index width = K + 2;
+  std::vector<feature_node> nodes(static_cast<size_t>(n * width));
+  std::vector<feature_node*> rows(static_cast<size_t>(n));
+  std::vector<double> targets(y.data(), y.data() + n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    feature_node* row = &nodes[static_cast<size_t>(i * width)];
+    rows[static_cast<size_t>(i)] = row;
+    for (Eigen::Index j = 0; j < K; ++j) row[j] = feature_node{static_cast<int>(j + 1), F(i, j) * scale[j]};
+    row[K] = feature_node{static_cast<int>(K + 1), 1.0};
+    row[K + 1] = feature_node{-1, 0.0};
+  }
+  problem prob{static_cast<int>(n), static_cast<int>(K + 1), targets.data(), rows.data(), -1.0};
+  parameter param{};
+  param.solver_type = L2R_L1LOSS_SVR_DUAL;
+  param.C = C;
+  param.p = epsilon;
+  param.eps = tolerance;
+  ::set_print_string_function([](const char*) {});
+  if (const char* err = ::check_parameter(&prob, &param)) throw std::runtime_error(std::string("SVR: ") + err);
+  // liblinear's dual coordinate descent visits the rows in an order drawn with the C library's
+  // rand(): a fixed srand makes the fit repeat, as its DETERMINISTIC flag promises (found by
+  // spml check-plugin: two fits differed by 0.017 in the mean).
+  std::srand(1);
+  ::model* m = ::train(&prob, &param);
+  std::pair<Eigen::VectorXd, double> out{Eigen::Map<const Eigen::VectorXd>(m->w, K).cwiseProduct(scale), m->w[K]};
+  free_and_destroy_model(&m);
+  return out;
+}
+
 class SupportVectorRegression : public LinearModel {
  public:
   void fit(const View& d, const spml_learner_model& model, const Config& config) override {
     require_model(d, model, "SVR");
     const Eigen::Index n = d.phi.rows(), M = d.phi.cols();
     const Eigen::VectorXd y = stacked_targets(d.Y);
-    Eigen::VectorXd scale(M);
-    for (Eigen::Index j = 0; j < M; ++j) {
-      const double rms = std::sqrt(d.phi.col(j).squaredNorm() / static_cast<double>(n));
-      scale[j] = rms > 0 ? 1.0 / rms : 1.0;
-    }
     const double mean = y.mean();
     const double sd = std::sqrt((y.array() - mean).square().mean());
     const double C_default = std::max(std::abs(mean + 3 * sd), std::abs(mean - 3 * sd));
@@ -99,41 +145,48 @@ class SupportVectorRegression : public LinearModel {
     const double eps_default = 3.0 * sigma * std::sqrt(std::log(static_cast<double>(n)) / static_cast<double>(n));
     const double C = config.number("C", C_default > 0 ? C_default : 1.0);
     const double epsilon = config.number("epsilon", eps_default);
-    const double tolerance = config.number("tolerance", 1e-4);
+    const double tolerance = config.number("tolerance");
     if (!(C > 0)) throw std::runtime_error("SVR: C must be > 0");
     if (!(epsilon >= 0)) throw std::runtime_error("SVR: epsilon must be >= 0");
-
-    // Row i: M features, the intercept feature (index M + 1, value 1) and the terminator.
-    const Eigen::Index width = M + 2;
-    std::vector<feature_node> nodes(static_cast<size_t>(n * width));
-    std::vector<feature_node*> rows(static_cast<size_t>(n));
-    std::vector<double> targets(y.data(), y.data() + n);
-    for (Eigen::Index i = 0; i < n; ++i) {
-      feature_node* row = &nodes[static_cast<size_t>(i * width)];
-      rows[static_cast<size_t>(i)] = row;
-      for (Eigen::Index j = 0; j < M; ++j) row[j] = feature_node{static_cast<int>(j + 1), d.phi(i, j) * scale[j]};
-      row[M] = feature_node{static_cast<int>(M + 1), 1.0};
-      row[M + 1] = feature_node{-1, 0.0};
+    const Eigen::MatrixXd basis = excited_directions(d.phi);
+    if (basis.cols() == M) {
+      std::tie(theta_, bias_) = linear_svr(d.phi, y, C, epsilon, tolerance);
+      return;
     }
-    problem prob{static_cast<int>(n), static_cast<int>(M + 1), targets.data(), rows.data(), -1.0};
-    parameter param{};
-    param.solver_type = L2R_L1LOSS_SVR_DUAL;
-    param.C = C;
-    param.p = epsilon;
-    param.eps = tolerance;
-    ::set_print_string_function([](const char*) {});
-    if (const char* err = ::check_parameter(&prob, &param)) throw std::runtime_error(std::string("SVR: ") + err);
-    ::model* m = ::train(&prob, &param);
-    theta_ = Eigen::Map<const Eigen::VectorXd>(m->w, M).cwiseProduct(scale);
-    bias_ = m->w[M];
-    free_and_destroy_model(&m);
+    // Constant or degenerate inputs: directions the data do not excite stay at 0, as in
+    // LLS' minimum-norm fit. Unit-RMS scaling of a column that is nearly 0 in training gave
+    // it a huge weight, and SVR predicted 1.8e6 N m on the arm's test split after training on
+    // one repeated state (LLS: 123).
+    Eigen::VectorXd w;
+    std::tie(w, bias_) = linear_svr(d.phi * basis, y, C, epsilon, tolerance);
+    theta_ = basis * w;
+    notes = "regressor rank " + std::to_string(basis.cols()) + " < " + std::to_string(M) +
+            " parameters: fitted in the excited directions only";
+  }
+
+ private:
+  // An orthonormal-in-scaled-units basis (M x r) of the parameter directions the data excite:
+  // the right singular vectors of the column-scaled regressor above LAPACK's rank threshold,
+  // mapped back to raw units.
+  static Eigen::MatrixXd excited_directions(const Eigen::MatrixXd& phi) {
+    const Eigen::Index M = phi.cols();
+    Eigen::VectorXd scale(M);
+    for (Eigen::Index j = 0; j < M; ++j) {
+      const double norm = phi.col(j).stableNorm();
+      scale[j] = norm > 0 ? 1.0 / norm : 1.0;
+    }
+    Eigen::BDCSVD<Eigen::MatrixXd> svd(phi * scale.asDiagonal(), Eigen::ComputeThinV);
+    svd.setThreshold(Eigen::NumTraits<double>::epsilon() * static_cast<double>(std::max(phi.rows(), M)));
+    const Eigen::Index r = svd.rank();
+    if (r == M) return Eigen::MatrixXd::Identity(M, M);
+    return scale.asDiagonal() * svd.matrixV().leftCols(r);
   }
 };
 
 constexpr spml_config_key kSvrKeys[] = {
     {"C", SPML_VALUE_NUMBER, 1e-300, HUGE_VAL, nullptr, "box constraint (default max|mean(y) +- 3 std(y)|)"},
     {"epsilon", SPML_VALUE_NUMBER, 0, HUGE_VAL, nullptr, "tube width (default 3 sigma sqrt(ln n / n))"},
-    {"tolerance", SPML_VALUE_NUMBER, 1e-12, 1, nullptr, "liblinear's stopping tolerance (default 1e-4)"},
+    {"tolerance", SPML_VALUE_NUMBER, 1e-12, 1, "1e-4", "liblinear's stopping tolerance"},
     {nullptr, 0, 0, 0, nullptr, nullptr}};
 
 }  // namespace

@@ -24,12 +24,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string fmt(double v) {
-  std::ostringstream s;
-  s << std::setprecision(6) << v;
-  return s.str();
-}
-
 // ---- 64-bit FNV-1a over everything a unit depends on ----
 class Hasher {
  public:
@@ -121,8 +115,25 @@ std::vector<int> match_columns(const std::vector<std::string>& want, const std::
   return idx;
 }
 
+// Values whose squares leave the range of doubles (beyond ~1e154 they overflow to inf, below
+// ~1e-154 they underflow to 0) break every learner's sums of squares: refused, naming the
+// column, instead of an RMSE of inf or 0.
+void check_scale(const RowMatrix& m, const std::vector<std::string>& columns, const std::string& where) {
+  for (Eigen::Index c = 0; c < m.cols(); ++c) {
+    const double top = m.col(c).cwiseAbs().maxCoeff();
+    if (top > 1e150 || (top > 0 && top < 1e-150)) {
+      std::ostringstream msg;
+      msg << where << ": column '" << columns[static_cast<size_t>(c)] << "' reaches at most |" << top
+          << "|: outside [1e-150, 1e150], where squared sums overflow or underflow; rescale it (other units)";
+      throw DatasetError(msg.str());
+    }
+  }
+}
+
 Part make_part(const Split& s, const Split& train, Eigen::Index max, const ParametricModel* model, const std::string& file) {
   const std::string where = file + ": split '" + s.name + "'";
+  check_scale(s.X, s.x_columns, where + ": X");
+  check_scale(s.Y, s.y_columns, where + ": Y");
   const std::vector<int> xc = match_columns(train.x_columns, s.x_columns, where + ": X");
   const std::vector<int> yc = match_columns(train.y_columns, s.y_columns, where + ": Y");
   Part p;
@@ -251,6 +262,48 @@ void remove_stale_temporaries(const std::string& out, const std::function<void(c
   }
 }
 
+// Every text bench.json would hold must be UTF-8 (JSON cannot hold anything else): checked
+// before anything is written, naming the value (a path with a Latin-1 byte, a --set value).
+void check_utf8_fields(const nlohmann::json& j, const std::string& out, const std::string& field = "") {
+  if (j.is_string()) {
+    const std::string& text = j.get_ref<const std::string&>();
+    if (const std::string why = utf8_problem(text); !why.empty())
+      throw LearnerError(text + ": " + (field.empty() ? "" : "bench.json field '" + field + "': ") + why + "; " + out +
+                         "/bench.json is JSON, which holds only UTF-8 text");
+  } else if (j.is_object()) {
+    for (const auto& [k, v] : j.items()) check_utf8_fields(v, out, k);
+  } else if (j.is_array()) {
+    for (const auto& v : j) check_utf8_fields(v, out, field);
+  }
+}
+
+// bench.json describes the run whose results.csv and predictions.h5 lie beside it. A run with
+// other settings first removes the old results (they stay until the new ones are written
+// only when bench.json is unchanged), so an interrupted run never leaves a bench.json that
+// disagrees with results.csv.
+void write_manifest(const std::string& out, const std::string& text) {
+  const fs::path file = fs::path(out) / "bench.json";
+  std::ifstream in(file, std::ios::binary);
+  const std::string before((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (before == text) return;
+  for (const char* old : {"results.csv", "predictions.h5"}) {
+    std::error_code ec;
+    fs::remove(fs::path(out) / old, ec);
+    if (ec) throw LearnerError((fs::path(out) / old).string() + ": cannot remove the previous run's results: " + ec.message());
+  }
+  write_text_atomic(file.string(), text);
+}
+
+// Copies the file unless an identical path already holds it; atomic (temp file + rename).
+void copy_unit(const fs::path& from, const fs::path& to) {
+  std::error_code ec;
+  if (fs::exists(to) && fs::equivalent(from, to, ec)) return;
+  fs::create_directories(to.parent_path());
+  const fs::path tmp = to.string() + ".tmp-" + std::to_string(::getpid());
+  fs::copy_file(from, tmp, fs::copy_options::overwrite_existing);
+  fs::rename(tmp, to);
+}
+
 // A finished unit, or nothing when the file is missing, unreadable or made for another key.
 std::optional<MatrixFile> read_unit(const std::string& path, const std::string& key, std::string* why) {
   if (!fs::exists(path)) return std::nullopt;
@@ -281,7 +334,7 @@ MatrixFile fit_unit(Learner& learner, const std::vector<Part>& parts, const Lear
     if (pred.var.size()) unit.matrices[parts[pi].name + "/var"] = pred.var;
     const Scores sc = score(parts[pi].Y, pred);
     line << " " << parts[pi].name << " RMSE";
-    for (double r : sc.rmse) line << " " << fmt(r);
+    for (double r : sc.rmse) line << " " << number_text(r);
   }
   const auto t2 = std::chrono::steady_clock::now();
   const Eigen::VectorXd coef = learner.coefficients();
@@ -289,8 +342,8 @@ MatrixFile fit_unit(Learner& learner, const std::vector<Part>& parts, const Lear
   unit.attributes["key"] = key;
   unit.attributes["learner"] = learner.name();
   unit.attributes["notes"] = learner.notes();
-  unit.attributes["fit_seconds"] = fmt(std::chrono::duration<double>(t1 - t0).count());
-  unit.attributes["predict_seconds"] = fmt(std::chrono::duration<double>(t2 - t1).count());
+  unit.attributes["fit_seconds"] = number_text(std::chrono::duration<double>(t1 - t0).count());
+  unit.attributes["predict_seconds"] = number_text(std::chrono::duration<double>(t2 - t1).count());
   fs::create_directories(fs::path(path).parent_path());
   write_matrix_file(path, unit);
   *summary = unit.attributes["fit_seconds"] + " s;" + line.str();
@@ -338,13 +391,23 @@ void aggregate(const std::string& scenario, const std::string& name, bool determ
 
 }  // namespace
 
+void BenchOptions::check() const {
+  if (data.empty()) throw LearnerError("--data: no dataset given");
+  if (out.empty()) throw LearnerError("--out: no output folder given");
+  if (reps < 1 || reps > 1000) throw LearnerError("--reps " + std::to_string(reps) + ": must be 1 ... 1000");
+  if (shards < 1 || shard < 1 || shard > shards)
+    throw LearnerError("--shard " + std::to_string(shard) + "/" + std::to_string(shards) + ": expected K/N with 1 <= K <= N");
+  if (train_max < 0) throw LearnerError("--train-max " + std::to_string(train_max) + ": must be a whole number >= 1 or all (0)");
+  if (test_max < 0) throw LearnerError("--test-max " + std::to_string(test_max) + ": must be a whole number >= 1 or all (0)");
+  for (const auto& [k, v] : config.values)
+    if (k.empty()) throw LearnerError("--set =" + v + ": expected key=value");
+}
+
 BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bool all_requested) {
   auto log = [&](const std::string& s) {
     if (o.log) o.log(s);
   };
-  if (o.reps < 1) throw LearnerError("--reps must be >= 1");
-  if (o.shards < 1 || o.shard < 1 || o.shard > o.shards)
-    throw LearnerError("--shard " + std::to_string(o.shard) + "/" + std::to_string(o.shards) + ": expected K/N with 1 <= K <= N");
+  o.check();
   const Dataset ds = read_dataset(o.data);
   const Split& train_split = ds.get("train");
   std::unique_ptr<ParametricModel> model;
@@ -374,8 +437,6 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bo
   }
   const std::string dkey = data_key(parts, train_split, lm);
 
-  fs::create_directories(o.out);
-  remove_stale_temporaries(o.out, o.log);
   // Provenance for people, and what `spml merge` needs to redo the run's aggregation;
   // reuse is decided per unit by its key.
   nlohmann::json config = nlohmann::json::array();
@@ -394,7 +455,12 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bo
                           {"test_max", o.test_max},
                           {"config", config},
                           {"shard", std::to_string(o.shard) + "/" + std::to_string(o.shards)}};
-  write_text_atomic((fs::path(o.out) / "bench.json").string(), manifest.dump(2) + "\n");
+  check_utf8_fields(manifest, o.out);
+  if (!utf8_problem(o.out).empty())
+    throw LearnerError(o.out + ": --out: " + utf8_problem(o.out) + "; bench.json is JSON, which holds only UTF-8");
+  fs::create_directories(o.out);
+  remove_stale_temporaries(o.out, o.log);
+  write_manifest(o.out, manifest.dump(2) + "\n");
 
   const std::string scenario = scenario_name(ds, o.data);
   std::ostringstream head;
@@ -437,7 +503,12 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bo
       std::ostringstream tag;
       tag << "[" << li + 1 << "/" << learners.size() << "] " << name << " rep " << rep + 1 << "/" << fits;
       std::string why;
-      if (auto u = read_unit(path, key, &why)) {
+      // merge: a unit comes from the folder of the shard that fitted it, never from a stale
+      // copy another shard's folder may hold, so the result does not depend on argument order.
+      const std::string source =
+          o.unit_sources.empty() ? path : unit_path(o.unit_sources[static_cast<size_t>(unit_number) % o.unit_sources.size()], name, rep);
+      if (auto u = read_unit(source, key, &why)) {
+        if (source != path) copy_unit(source, path);
         ++report.units_cached;
         if (in_shard) {
           progress.skip();
@@ -447,7 +518,7 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bo
         continue;
       }
       if (o.reuse_only)
-        throw LearnerError("unit " + name + " rep " + std::to_string(rep + 1) + " (" + path + ") " +
+        throw LearnerError("unit " + name + " rep " + std::to_string(rep + 1) + " (" + source + ") " +
                            (why.empty() ? "is missing" : why) + ": was its shard run to the end?");
       if (!in_shard) {
         ++report.units_elsewhere;
@@ -506,21 +577,17 @@ std::pair<int, int> shard_of(const nlohmann::json& m, const std::string& dir) {
   return {static_cast<int>(*k), static_cast<int>(*n)};
 }
 
-// Copies the file unless an identical path already holds it; atomic (temp file + rename).
-void copy_unit(const fs::path& from, const fs::path& to) {
-  std::error_code ec;
-  if (fs::exists(to) && fs::equivalent(from, to, ec)) return;
-  fs::create_directories(to.parent_path());
-  const fs::path tmp = to.string() + ".tmp-" + std::to_string(::getpid());
-  fs::copy_file(from, tmp, fs::copy_options::overwrite_existing);
-  fs::rename(tmp, to);
-}
-
 }  // namespace
 
 BenchReport merge_bench(const LearnerRegistry& registry, const std::vector<std::string>& shard_dirs, const std::string& out,
                         const std::function<void(const std::string&)>& log) {
   if (shard_dirs.empty()) throw LearnerError("merge: no shard folders given");
+  for (const auto& dir : shard_dirs) {
+    std::error_code ec;
+    if (fs::exists(out) && fs::equivalent(dir, out, ec))
+      throw LearnerError("merge: --out " + out + " is the shard folder " + dir +
+                         " (merging into it would overwrite that shard's results); merge into a new folder");
+  }
   const nlohmann::json first = read_manifest(shard_dirs.front());
   const int shards = shard_of(first, shard_dirs.front()).second;
   std::vector<std::string> owner(static_cast<size_t>(shards));
@@ -544,17 +611,8 @@ BenchReport merge_bench(const LearnerRegistry& registry, const std::vector<std::
     if (owner[static_cast<size_t>(k)].empty()) missing += (missing.empty() ? "" : ", ") + std::to_string(k + 1) + "/" + std::to_string(shards);
   if (!missing.empty()) throw LearnerError("merge: shard(s) " + missing + " not given");
 
-  for (const auto& dir : shard_dirs) {
-    const fs::path units = fs::path(dir) / "units";
-    if (!fs::exists(units)) continue;
-    for (const auto& e : fs::recursive_directory_iterator(units)) {
-      const std::string name = e.path().filename().string();
-      if (!e.is_regular_file() || e.path().extension() != ".h5" || name.find(".tmp-") != std::string::npos) continue;
-      copy_unit(e.path(), fs::path(out) / "units" / fs::relative(e.path(), units));
-    }
-  }
-
   BenchOptions o;
+  o.unit_sources = owner;
   o.data = first.at("data").get<std::string>();
   o.model = first.at("model_file").get<std::string>();
   o.learners = first.at("learners").get<std::vector<std::string>>();

@@ -13,6 +13,7 @@
 #include "spml/csv.h"
 #include "spml/dataset.h"
 #include "spml/learners/learner.h"
+#include "spml/parse.h"
 #include "spml/plugin_loader.h"
 
 namespace spml {
@@ -35,13 +36,7 @@ std::vector<double> ranks(const std::vector<double>& v) {
   return r;
 }
 
-std::string num(double v, int precision = 2) {
-  if (std::isnan(v)) return "-";
-  if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
-  std::ostringstream s;
-  s << std::fixed << std::setprecision(precision) << v;
-  return s.str();
-}
+std::string num(double v, int precision = 2) { return std::isnan(v) ? "-" : number_text(v, precision, true); }
 
 std::string delta(double ours, double paper) {
   if (std::isnan(paper) || std::isinf(paper) || std::isinf(ours)) return "";

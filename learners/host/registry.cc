@@ -9,11 +9,7 @@
 namespace spml {
 namespace {
 
-std::string check_learner(const void* entry) {
-  const auto* l = static_cast<const spml_learner*>(entry);
-  if (!l->fit || !l->predict || !l->destroy) return "entry lacks fit, predict or destroy";
-  return "";
-}
+std::string check_learner(const void* entry) { return learner_problem(*static_cast<const spml_learner*>(entry)); }
 
 std::set<std::string> key_set(const spml_config_key* table) {
   std::set<std::string> out;
@@ -31,12 +27,16 @@ class PluginLearner : public Learner {
 
   void fit(const LearnerData& train, const LearnerModel& model, const LearnerConfig& config) override {
     release();
+    // The user's values for this learner's keys, then the table's defaults for the rest.
+    std::vector<std::pair<std::string, std::string>> mine;
+    for (const auto& kv : config.values)
+      if (find_config_key(api_->config_keys, kv.first)) mine.push_back(kv);
+    const auto filled = with_defaults(api_->config_keys, std::move(mine));
     std::vector<const char*> keys, values;
-    for (const auto& [k, v] : config.values)
-      if (find_config_key(api_->config_keys, k)) {
-        keys.push_back(k.c_str());
-        values.push_back(v.c_str());
-      }
+    for (const auto& [k, v] : filled) {
+      keys.push_back(k.c_str());
+      values.push_back(v.c_str());
+    }
     spml_learner_config c{static_cast<int32_t>(keys.size()), keys.data(), values.data(), config.seed};
     std::vector<const char*> names;
     for (const auto& n : model.names) names.push_back(n.c_str());
@@ -96,8 +96,17 @@ class PluginLearner : public Learner {
 
 }  // namespace
 
-LearnerRegistry::LearnerRegistry()
-    : catalog_({"learner", "spml_learner", SPML_LEARNER_ABI_VERSION, "SPML_LEARNER_PATH", "learners"}, &check_learner) {}
+const PluginKind& learner_plugin_kind() {
+  static const PluginKind kind{"learner", "spml_learner", SPML_LEARNER_ABI_VERSION, "SPML_LEARNER_PATH", "learners"};
+  return kind;
+}
+
+std::string learner_problem(const spml_learner& l) {
+  if (!l.fit || !l.predict || !l.destroy) return "entry lacks fit, predict or destroy";
+  return "";
+}
+
+LearnerRegistry::LearnerRegistry() : catalog_(learner_plugin_kind(), &check_learner) {}
 
 void LearnerRegistry::add_default_path() { catalog_.add_default_path(); }
 void LearnerRegistry::add(const std::string& where) { catalog_.add(where, true); }

@@ -16,11 +16,17 @@ constexpr const char* kColumns[] = {"scenario", "split",   "output",  "algo",   
                                     "rmsemin",  "rmsemax", "nllhmean", "nllhstd", "nllhmin",  "nllhmax",
                                     "fits",     "fitsec",  "warnings"};
 
-std::string fmt(double v) {
-  if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
-  std::ostringstream s;
-  s << std::setprecision(6) << v;
-  return s.str();
+// A text field of results.csv: one line (newlines become spaces), in double quotes when it
+// holds a comma or a quote (RFC 4180: a quote inside is doubled), so that a data file or split
+// called "a,b" stays one field for compare, plot and any CSV reader.
+std::string field(std::string text) {
+  for (char& c : text)
+    if (c == '\n' || c == '\r') c = ' ';
+  if (text.find_first_of(",\"") == std::string::npos && (text.empty() || (text.front() != ' ' && text.back() != ' ')))
+    return text;
+  std::string q = "\"";
+  for (char c : text) q += c == '"' ? std::string("\"\"") : std::string(1, c);
+  return q + "\"";
 }
 
 double number(const std::string& text, const std::string& where, bool allow_missing) {
@@ -85,12 +91,11 @@ std::string results_line(const ResultRow& r) {
   std::string warnings = r.warnings;
   for (char& c : warnings)
     if (c == ',') c = ';';
-    else if (c == '\n' || c == '\r') c = ' ';
   std::ostringstream s;
-  s << r.scenario << "," << r.split << "," << r.output << "," << r.algo << "," << fmt(r.rmse_mean) << ","
-    << fmt(r.rmse_std) << "," << fmt(r.rmse_min) << "," << fmt(r.rmse_max) << "," << fmt(r.nllh_mean) << ","
-    << fmt(r.nllh_std) << "," << fmt(r.nllh_min) << "," << fmt(r.nllh_max) << "," << r.fits << ","
-    << fmt(r.fit_seconds) << "," << warnings;
+  s << field(r.scenario) << "," << field(r.split) << "," << r.output << "," << field(r.algo) << "," << number_text(r.rmse_mean) << ","
+    << number_text(r.rmse_std) << "," << number_text(r.rmse_min) << "," << number_text(r.rmse_max) << "," << number_text(r.nllh_mean) << ","
+    << number_text(r.nllh_std) << "," << number_text(r.nllh_min) << "," << number_text(r.nllh_max) << "," << r.fits << ","
+    << number_text(r.fit_seconds) << "," << field(warnings);
   return s.str();
 }
 

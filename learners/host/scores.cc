@@ -10,13 +10,16 @@ Scores score(const RowMatrix& Y, const LearnerPrediction& p) {
   Scores s;
   const double n = static_cast<double>(Y.rows());
   for (Eigen::Index o = 0; o < Y.cols(); ++o) {
-    const Eigen::ArrayXd err = (Y.col(o) - p.mean.col(o)).array();
-    s.rmse.push_back(std::sqrt(err.square().sum() / n));
+    // Scaled sums (Eigen's stableNorm, error over predicted std): squares of values beyond
+    // 1e154 overflow and below 1e-154 underflow, which made RMSE inf or 0 for Y x 1e200 / 1e-300.
+    const Eigen::VectorXd err = Y.col(o) - p.mean.col(o);
+    s.rmse.push_back(err.stableNorm() / std::sqrt(n));
     if (p.var.size() == 0) {
       s.nllh.push_back(std::numeric_limits<double>::infinity());
     } else {
       const Eigen::ArrayXd v = p.var.col(o).array();
-      s.nllh.push_back((0.5 * (2.0 * M_PI * v).log() + 0.5 * err.square() / v).sum() / n);
+      const Eigen::ArrayXd z = err.array() / v.sqrt();
+      s.nllh.push_back((0.5 * (std::log(2.0 * M_PI) + v.log()) + 0.5 * z.square()).sum() / n);
     }
   }
   return s;

@@ -8,31 +8,42 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
 
+#include "spml/abi.h"
 #include "spml/row_matrix.h"
 
 namespace spml::torch_learners {
 
+// The defaults live once, in the key table of library.cc (the host fills them in); a zero here
+// only means "not set".
 struct BayesNetOptions {
-  std::vector<int> hidden{64, 64, 64};   // units per hidden layer (ELU), linear output
+  std::vector<int> hidden;               // units per hidden layer (ELU), linear output
   int epochs = 0;                        // 0: as many as give `steps` optimiser steps
-  int steps = 3000;                      // used when epochs = 0
-  int batch = 64;                        // rows per optimiser step (fewer if the data has fewer)
-  double learning_rate = 1e-2;           // Adam; beta = (0.9, 0.999), eps = 1e-7 as Keras' defaults
-  double kl_weight = 1e-3;               // beta of the tempered ELBO: -NLL - beta KL / rows (1: exact)
-  double prior_scale = 1.0;              // dense weights ~ N(0, prior_scale^2 / fan_in)
-  double model_prior_scale = 10.0;       // model path: theta_j ~ N(prior_j, (model_prior_scale / a_j)^2)
-  double obs_var = 0.0;                  // > 0: fixed observation variance (target units^2); 0: learned
-  double noise_floor = 1e-6;             // learned noise: lower bound, fraction of the target variance
-  int samples = 30;                      // weight draws per prediction
-  int threads = 1;                       // LibTorch intra-op threads during fit and predict
+  int steps = 0;                         // used when epochs = 0
+  int batch = 0;                         // rows per optimiser step (fewer if the data has fewer)
+  double learning_rate = 0;              // Adam; beta = (0.9, 0.999), eps = 1e-7 as Keras' defaults
+  double kl_weight = 0;                  // beta of the tempered ELBO: -NLL - beta KL / rows (1: exact)
+  double prior_scale = 0;                // dense weights ~ N(0, prior_scale^2 / fan_in)
+  double model_prior_scale = 0;          // model path: theta_j ~ N(prior_j, (model_prior_scale / a_j)^2)
+  double obs_var = 0;                    // > 0: fixed observation variance (target units^2); 0: learned
+  double noise_floor = 0;                // learned noise: lower bound, fraction of the target variance
+  int samples = 0;                       // weight draws per prediction
+  int threads = 0;                       // LibTorch intra-op threads during fit and predict
   std::uint64_t seed = 0;
   bool model_path = false;               // BaMbANN: add phi(x).theta with a Bayesian theta
-  double model_warmup = 0.0;             // BaMbANN: fraction of the epochs that fit the model path alone
+  double model_warmup = 0;               // BaMbANN: fraction of the epochs that fit the model path alone
 };
+
+// The config keys of BNN (model_path false) and BaMbANN ({NULL}-ended): the one place their
+// defaults live (options.cc).
+const spml_config_key* bayes_net_keys(bool model_path);
+// Options from key=value text; a key left out takes its table default. Throws naming a bad value.
+BayesNetOptions bayes_net_options(const std::map<std::string, std::string>& values, Eigen::Index outputs,
+                                  bool model_path, std::uint64_t seed);
 
 // One fitted network. fit() and predict() take the ABI's layouts: X rows x inputs, Y rows x
 // outputs, phi (outputs*rows) x params output-major (spml/learner.h).

@@ -3,7 +3,7 @@
 // extended model, Janot et al. 2019). Per joint:
 //   qd > 0:  -fc_pos - fv_pos * qd        qd < 0:  +fc_neg - fv_neg * qd        qd = 0: 0
 // Linear in (fc_pos, fc_neg, fv_pos, fv_neg), which are the parameters exposed.
-#include "effect_base.h"
+#include "spml/effect_base.h"
 
 namespace spml::effects {
 

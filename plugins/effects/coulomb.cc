@@ -1,5 +1,5 @@
 // coulomb: dry friction -fc * sign(qd) per joint (optionally tanh-smoothed over `smooth`).
-#include "effect_base.h"
+#include "spml/effect_base.h"
 
 namespace spml::effects {
 

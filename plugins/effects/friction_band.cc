@@ -1,7 +1,7 @@
 // friction_band: extra dry friction -level * sign(qd) acting only while the joint position
 // lies in [lower, upper] - a local defect such as a damaged bearing race or a tight spot in a
 // gear (the paper's SimDyn-Ll mismatch). Linear in `level` for a fixed interval.
-#include "effect_base.h"
+#include "spml/effect_base.h"
 
 namespace spml::effects {
 

@@ -1,5 +1,5 @@
 // offset: a constant generalized force per joint (sensor bias, cable or spring preload).
-#include "effect_base.h"
+#include "spml/effect_base.h"
 
 namespace spml::effects {
 

@@ -2,7 +2,7 @@
 // drive ripple model the paper borrows from Godler et al. (1999): harmonics h of the gear
 // ratio. Written as s_h sin(h*gear*q) + c_h cos(h*gear*q) with s = a cos(phi), c = a sin(phi)
 // it is linear in (s_h, c_h), which are the parameters exposed.
-#include "effect_base.h"
+#include "spml/effect_base.h"
 
 namespace spml::effects {
 

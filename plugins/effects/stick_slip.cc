@@ -4,7 +4,7 @@
 // Stribeck curve g(v) = fc + (fs - fc) exp(-(v/vs)^2) plus viscous sigma2*v.
 //   dz/dt = v - sigma0 |v| z / g(v),   F = sigma0 z + sigma1 dz/dt + sigma2 v,   force = -F.
 // Not linear in its parameters, so it has no regressor columns.
-#include "effect_base.h"
+#include "spml/effect_base.h"
 
 namespace spml::effects {
 

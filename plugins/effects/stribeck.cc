@@ -1,6 +1,6 @@
 // stribeck: -(fc + (fs - fc) exp(-(qd/vs)^2)) sign(qd) per joint. With the Stribeck
 // velocity vs fixed (a structural constant), the force is linear in (fc, fs).
-#include "effect_base.h"
+#include "spml/effect_base.h"
 
 namespace spml::effects {
 

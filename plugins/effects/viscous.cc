@@ -1,5 +1,5 @@
 // viscous: velocity-proportional friction -fv * qd per joint.
-#include "effect_base.h"
+#include "spml/effect_base.h"
 
 namespace spml::effects {
 

@@ -35,7 +35,19 @@ void passive_dispatch(const mjModel* m, mjData* d) {
 }
 
 std::string check_force_plugin(const void* entry) {
-  const auto* p = static_cast<const spml_force_plugin*>(entry);
+  return force_plugin_problem(*static_cast<const spml_force_plugin*>(entry));
+}
+
+}  // namespace
+
+const PluginKind& force_plugin_kind() {
+  static const PluginKind kind{"force plugin", "spml_force_plugin", SPML_FORCE_PLUGIN_ABI_VERSION, "SPML_PLUGIN_PATH",
+                               "plugins"};
+  return kind;
+}
+
+std::string force_plugin_problem(const spml_force_plugin& plugin) {
+  const spml_force_plugin* p = &plugin;
   if (!p->create || !p->destroy || !p->compute || !p->nparam || !p->param_name || !p->get_params || !p->set_params)
     return "descriptor lacks a required callback (create, destroy, compute, nparam, param_name, get_params, set_params)";
   for (const spml_shape_param* sp = p->shape_params; sp && sp->key; ++sp) {
@@ -47,8 +59,6 @@ std::string check_force_plugin(const void* entry) {
   }
   return "";
 }
-
-}  // namespace
 
 std::vector<std::pair<std::string, std::string>> parse_config_words(const std::string& text, const std::string& where) {
   std::vector<std::pair<std::string, std::string>> out;
@@ -97,8 +107,7 @@ std::vector<PluginDeclaration> parse_plugin_declarations(const mjModel* m, const
 
 PluginCatalog& force_plugins() {
   static PluginCatalog catalog = [] {
-    PluginCatalog c({"force plugin", "spml_force_plugin", SPML_FORCE_PLUGIN_ABI_VERSION, "SPML_PLUGIN_PATH", "plugins"},
-                    &check_force_plugin);
+    PluginCatalog c(force_plugin_kind(), &check_force_plugin);
     c.add_default_path();
     return c;
   }();
@@ -124,7 +133,6 @@ namespace {
 void* create_checked(const spml_force_plugin& p, const mjModel* m, const std::vector<int>& joints,
                      const std::vector<std::pair<std::string, std::string>>& given, const std::string& where) {
   const std::string plugin = "plugin '" + std::string(p.name) + "'";
-  std::vector<std::pair<std::string, std::string>> config;
   for (auto& [k, v] : given) {
     const spml_config_key* key = find_config_key(p.config_keys, k);
     if (!key)
@@ -132,15 +140,14 @@ void* create_checked(const spml_force_plugin& p, const mjModel* m, const std::ve
                         config_key_list(p.config_keys) + ")");
     if (std::string why = check_config_value(*key, v); !why.empty())
       throw PluginError(where + ": " + plugin + ": key '" + k + "': " + why);
-    config.emplace_back(k, v);
   }
   for (const spml_config_key* key = p.config_keys; key && key->name; ++key) {
     bool present = false;
     for (auto& kv : given) present |= kv.first == key->name;
-    if (present) continue;
-    if (!key->default_value) throw PluginError(where + ": " + plugin + ": missing required key '" + key->name + "'");
-    config.emplace_back(key->name, key->default_value);
+    if (!present && !key->default_value)
+      throw PluginError(where + ": " + plugin + ": missing required key '" + key->name + "'");
   }
+  const auto config = with_defaults(p.config_keys, given);
   std::vector<const char*> keys, values;
   for (auto& [k, v] : config) {
     keys.push_back(k.c_str());
@@ -197,17 +204,14 @@ ForceEffects::ForceEffects(const mjModel* m, const std::string& source) : m_(m) 
     const spml_force_plugin& p = load_force_plugin(decl.type, where);
     std::vector<int> joints;
     for (auto& j : decl.joints) joints.push_back(mj_name2id(m, mjOBJ_JOINT, j.c_str()));
-    void* state = create_checked(p, m, joints, decl.config, where);
-    int np = p.nparam(state);
-    instances_.push_back({std::move(decl), &p, state, nparam_, np});
+    PluginInstance object(p, m, joints, decl.config, where);
+    const int np = object.nparam();
+    instances_.push_back({std::move(decl), std::move(object), nparam_, np});
     nparam_ += np;
   }
 }
 
-ForceEffects::~ForceEffects() {
-  detach();
-  for (auto& inst : instances_) inst.plugin->destroy(inst.state);
-}
+ForceEffects::~ForceEffects() { detach(); }
 
 void ForceEffects::attach() {
   std::lock_guard<std::mutex> lock(g_write_mutex);
@@ -246,42 +250,42 @@ void ForceEffects::detach() {
 }
 
 void ForceEffects::compute(const mjData* d, mjtNum* qfrc) const {
-  for (const auto& inst : instances_) inst.plugin->compute(inst.state, m_, d, qfrc);
+  for (const auto& inst : instances_) inst.plugin().compute(inst.state(), m_, d, qfrc);
 }
 
 void ForceEffects::advance(const mjData* d, double dt) {
   for (auto& inst : instances_)
-    if (inst.plugin->advance) inst.plugin->advance(inst.state, m_, d, dt);
+    if (inst.plugin().advance) inst.plugin().advance(inst.state(), m_, d, dt);
 }
 
 void ForceEffects::reset() {
   for (auto& inst : instances_)
-    if (inst.plugin->reset) inst.plugin->reset(inst.state);
+    if (inst.plugin().reset) inst.plugin().reset(inst.state());
 }
 
 std::vector<std::string> ForceEffects::param_names() const {
   std::vector<std::string> names;
   for (const auto& inst : instances_)
-    for (int i = 0; i < inst.nparam; ++i) names.push_back(inst.decl.instance + "." + inst.plugin->param_name(inst.state, i));
+    for (int i = 0; i < inst.nparam; ++i) names.push_back(inst.decl.instance + "." + inst.plugin().param_name(inst.state(), i));
   return names;
 }
 
 Eigen::VectorXd ForceEffects::params() const {
   Eigen::VectorXd theta(nparam_);
-  for (const auto& inst : instances_) inst.plugin->get_params(inst.state, theta.data() + inst.param_offset);
+  for (const auto& inst : instances_) inst.plugin().get_params(inst.state(), theta.data() + inst.param_offset);
   return theta;
 }
 
 void ForceEffects::set_params(const Eigen::VectorXd& theta) {
   if (theta.size() != nparam_) throw PluginError("set_params: expected " + std::to_string(nparam_) + " values");
-  for (auto& inst : instances_) inst.plugin->set_params(inst.state, theta.data() + inst.param_offset);
+  for (auto& inst : instances_) inst.plugin().set_params(inst.state(), theta.data() + inst.param_offset);
 }
 
 std::vector<std::string> ForceEffects::linear_names() const {
   std::vector<std::string> names;
   for (const auto& inst : instances_)
-    if (inst.plugin->regressor)
-      for (int i = 0; i < inst.nparam; ++i) names.push_back(inst.decl.instance + "." + inst.plugin->param_name(inst.state, i));
+    if (inst.plugin().regressor)
+      for (int i = 0; i < inst.nparam; ++i) names.push_back(inst.decl.instance + "." + inst.plugin().param_name(inst.state(), i));
   return names;
 }
 
@@ -289,7 +293,7 @@ Eigen::VectorXd ForceEffects::linear_params() const {
   const Eigen::VectorXd all = params();
   std::vector<double> out;
   for (const auto& inst : instances_)
-    if (inst.plugin->regressor)
+    if (inst.plugin().regressor)
       for (int i = 0; i < inst.nparam; ++i) out.push_back(all[inst.param_offset + i]);
   return Eigen::Map<Eigen::VectorXd>(out.data(), static_cast<Eigen::Index>(out.size()));
 }
@@ -297,21 +301,21 @@ Eigen::VectorXd ForceEffects::linear_params() const {
 std::vector<std::string> ForceEffects::nonlinear_instances() const {
   std::vector<std::string> out;
   for (const auto& inst : instances_)
-    if (!inst.plugin->regressor) out.push_back(inst.decl.instance + " (" + inst.decl.type + ")");
+    if (!inst.plugin().regressor) out.push_back(inst.decl.instance + " (" + inst.decl.type + ")");
   return out;
 }
 
 Eigen::MatrixXd ForceEffects::linear_regressor(const mjtNum* qpos, const mjtNum* qvel) const {
   int cols = 0;
   for (const auto& inst : instances_)
-    if (inst.plugin->regressor) cols += inst.nparam;
+    if (inst.plugin().regressor) cols += inst.nparam;
   Eigen::MatrixXd R = Eigen::MatrixXd::Zero(m_->nv, cols);
   int c = 0;
   std::vector<mjtNum> block;
   for (const auto& inst : instances_) {
-    if (!inst.plugin->regressor) continue;
+    if (!inst.plugin().regressor) continue;
     block.assign(static_cast<size_t>(m_->nv) * inst.nparam, 0.0);
-    inst.plugin->regressor(inst.state, m_, qpos, qvel, block.data());
+    inst.plugin().regressor(inst.state(), m_, qpos, qvel, block.data());
     for (int r = 0; r < m_->nv; ++r)
       for (int k = 0; k < inst.nparam; ++k) R(r, c + k) = block[static_cast<size_t>(r) * inst.nparam + k];
     c += inst.nparam;

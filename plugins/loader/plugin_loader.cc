@@ -149,6 +149,18 @@ const spml_config_key* find_config_key(const spml_config_key* table, const std::
   return nullptr;
 }
 
+std::vector<std::pair<std::string, std::string>> with_defaults(const spml_config_key* table,
+                                                               std::vector<std::pair<std::string, std::string>> given) {
+  const size_t n = given.size();
+  for (const spml_config_key* k = table; k && k->name; ++k) {
+    if (!k->default_value) continue;
+    bool present = false;
+    for (size_t i = 0; i < n; ++i) present |= given[i].first == k->name;
+    if (!present) given.emplace_back(k->name, k->default_value);
+  }
+  return given;
+}
+
 std::string config_key_list(const spml_config_key* table) {
   std::string out;
   for (const spml_config_key* k = table; k && k->name; ++k) out += (out.empty() ? "" : ", ") + std::string(k->name);

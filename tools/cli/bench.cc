@@ -62,14 +62,19 @@ void add_bench(CLI::App& app) {
       if (eq == std::string::npos || eq == 0) throw CLI::ValidationError("--set", "'" + kv + "': expected key=value");
       o.config.values.emplace_back(kv.substr(0, eq), kv.substr(eq + 1));
     }
+    o.data = *data;
+    o.model = *model;
+    o.out = *out;
+    o.reps = *reps;
+    try {
+      o.check();   // the library's own check: the C++ API refuses what the command line refuses
+    } catch (const LearnerError& e) {
+      throw CLI::ValidationError(e.what());
+    }
     add_plugin_paths(*plugin_paths);
     LearnerRegistry registry;
     load_learners(registry, *paths);
-    o.data = *data;
-    o.model = *model;
     o.learners = registry.expand(*learners);
-    o.out = *out;
-    o.reps = *reps;
     o.log = [](const std::string& line) { std::cerr << line << std::endl; };
     const BenchReport r = run_bench(registry, o, *learners == "all");
     for (const auto& s : r.skipped) std::cerr << "skipped " << s << "\n";

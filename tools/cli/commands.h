@@ -22,12 +22,19 @@ void add_plot(CLI::App& app);
 void add_learners(CLI::App& app);
 void add_plugins(CLI::App& app);
 void add_diagnose(CLI::App& app);
+void add_check_plugin(CLI::App& app);
 
 // Option values that CLI11 would convert too leniently ("-1" into 2^64-1) are taken as
 // text and parsed here, with messages naming the option.
 std::uint64_t seed_option(const std::string& option, const std::string& text);
 // "K/N" with 1 <= K <= N.
 std::pair<int, int> shard_option(const std::string& option, const std::string& text);
+// The one check of every floating-point option: the text must be a finite number (no nan,
+// inf, trailing junk) within [lo, hi] (lo excluded when lo_open). A CLI11 validator, so a bad
+// value is a command-line error (exit 2) naming the option.
+CLI::Validator finite_number(double lo, double hi, bool lo_open = false);
+// The same check on text taken as a string option; returns the number.
+double finite_option(const std::string& option, const std::string& text, double lo, double hi, bool lo_open = false);
 // A row cap: a whole number >= 1, or "all" (returned as 0).
 long row_cap_option(const std::string& option, const std::string& text);
 // s as one word for /bin/sh (single quotes; a quote inside becomes '\''): the plot

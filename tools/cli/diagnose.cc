@@ -22,17 +22,17 @@ void add_diagnose(CLI::App& app) {
   cmd->add_option("--test-split", o->test_split,
                   "split the gain is measured on (default: the first other split; with one split, its last --holdout rows)");
   cmd->add_option("--holdout", o->holdout, "fraction held out (time-ordered) when the dataset has one split")
-      ->capture_default_str()->check(CLI::Range(0.05, 0.9));
+      ->capture_default_str()->check(finite_number(0.05, 0.9));
   cmd->add_option("--cross", o->cross, "another dataset (e.g. a validation record) scored before, after each cause and after all; repeatable");
   cmd->add_option("--out,-o", *out, "output folder: report.json, report.md, extended.xml, series.csv, plots/")->required();
   cmd->add_option("--plugin-path", *paths, "extra force-plugin library or folder: its plugins are candidates too (also $SPML_PLUGIN_PATH)");
   cmd->add_option("--bic-threshold", o->bic_threshold, "evidence a cause needs on the fit split (Delta BIC)")
-      ->capture_default_str()->check(CLI::Range(0.0, 1e9));
+      ->capture_default_str()->check(finite_number(0.0, 1e9));
   cmd->add_option("--min-gain", o->min_gain, "relative drop of its joints' test residual sum of squares a cause needs")
-      ->capture_default_str()->check(CLI::Range(0.0, 1.0));
+      ->capture_default_str()->check(finite_number(0.0, 1.0));
   cmd->add_option("--max-causes", o->max_causes, "stop after this many causes")->capture_default_str()->check(CLI::Range(1, 1000));
-  cmd->add_option("--still-speed", o->still_speed, "a joint whose |qd| never exceeds this does not move")->capture_default_str()->check(CLI::Range(0.0, 1e9));
-  cmd->add_option("--rollout-seconds", o->rollout_seconds, "length of each rollout")->capture_default_str()->check(CLI::Range(1e-3, 10.0));
+  cmd->add_option("--still-speed", o->still_speed, "a joint whose |qd| never exceeds this does not move")->capture_default_str()->check(finite_number(0.0, 1e9));
+  cmd->add_option("--rollout-seconds", o->rollout_seconds, "length of each rollout")->capture_default_str()->check(finite_number(1e-3, 10.0));
   cmd->add_option("--rollouts", o->rollouts, "number of rollouts (0: none)")->capture_default_str()->check(CLI::Range(0, 10000));
   cmd->add_flag("--no-plots", *no_plots, "do not draw plots/ (needs /usr/bin/python3 with matplotlib)");
   cmd->callback([=] {

@@ -44,14 +44,13 @@ void add_import(CLI::App& app) {
         throw DatasetError(a->out + ": is an input file; choose another --out (import never overwrites its input)");
     }
     Conditioning& c = a->spec.conditioning;
-    const auto lowpass = parse_number(a->lowpass);
-    if (!lowpass || *lowpass < 0) throw CLI::ValidationError("--lowpass", "'" + a->lowpass + "' is not a cut-off >= 0 [Hz]");
+    const double lowpass = finite_option("--lowpass", a->lowpass, 0.0, 1e12);
     const auto order = parse_integer(a->order, 2, 12), drop = parse_integer(a->drop, 0, 1000000000),
                decimate = parse_integer(a->decimate, 1, 1000000);
     if (!order || *order % 2) throw CLI::ValidationError("--filter-order", "'" + a->order + "' is not an even number in [2, 12]");
     if (!drop) throw CLI::ValidationError("--drop-edges", "'" + a->drop + "' is not a whole number >= 0");
     if (!decimate) throw CLI::ValidationError("--decimate", "'" + a->decimate + "' is not a whole number >= 1");
-    c.lowpass_hz = *lowpass;
+    c.lowpass_hz = lowpass;
     c.filter_order = static_cast<int>(*order);
     c.drop_edges = static_cast<int>(*drop);
     c.decimate = static_cast<int>(*decimate);

@@ -91,7 +91,9 @@ void add_info(CLI::App& app) {
   cmd->add_flag("--json", *json, "print JSON instead of text");
   cmd->add_flag("--allow-nonfinite", *allow_nan, "accept NaN/Inf values instead of rejecting the file");
   cmd->callback([=] {
-    Dataset ds = read_dataset(*file, ReadOptions{*allow_nan});
+    Dataset ds = read_dataset(*file, ReadOptions{*allow_nan});   // names and attributes are checked to be UTF-8
+    if (const std::string why = utf8_problem(*file); *json && !why.empty())
+      throw DatasetError(*file + ": the file name is " + why + "; JSON output holds only UTF-8 (rename the file)");
     nlohmann::json j = describe(*file, ds);
     if (*json)
       std::cout << j.dump(2) << "\n";

@@ -39,6 +39,7 @@ int main(int argc, char** argv) {
   spml::cli::add_learners(app);
   spml::cli::add_plugins(app);
   spml::cli::add_diagnose(app);
+  spml::cli::add_check_plugin(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::Success& e) {   // --help, --help-all, --version

@@ -2,12 +2,43 @@
 #include "spml/force_effects.h"
 #include "spml/parse.h"
 
+#include <sstream>
+
 namespace spml::cli {
 
 std::uint64_t seed_option(const std::string& option, const std::string& text) {
   const auto v = parse_seed(text);
   if (!v) throw CLI::ValidationError(option, "'" + text + "' is not a seed (a whole number from 0 to 18446744073709551615)");
   return *v;
+}
+
+namespace {
+
+std::string range_text(double lo, double hi, bool lo_open) {
+  std::ostringstream s;
+  s << (lo_open ? "(" : "[") << lo << ", " << hi << "]";
+  return s.str();
+}
+
+// "" when `text` is a finite number in the range, else why not.
+std::string finite_problem(const std::string& text, double lo, double hi, bool lo_open) {
+  const auto v = parse_number(text);
+  const std::string range = range_text(lo, hi, lo_open);
+  if (!v) return "'" + text + "' is not a finite number (expected one in " + range + ")";
+  if (*v < lo || *v > hi || (lo_open && *v == lo)) return "'" + text + "' is outside " + range;
+  return "";
+}
+
+}  // namespace
+
+CLI::Validator finite_number(double lo, double hi, bool lo_open) {
+  return CLI::Validator([=](std::string& text) { return finite_problem(text, lo, hi, lo_open); },
+                        "FINITE in " + range_text(lo, hi, lo_open));
+}
+
+double finite_option(const std::string& option, const std::string& text, double lo, double hi, bool lo_open) {
+  if (const std::string why = finite_problem(text, lo, hi, lo_open); !why.empty()) throw CLI::ValidationError(option, why);
+  return *parse_number(text);
 }
 
 long row_cap_option(const std::string& option, const std::string& text) {

@@ -27,7 +27,7 @@ void add_plot(CLI::App& app) {
   cmd->add_option("--learners", *learners, "Learners in the prediction figures (default: LLS and the two best)");
   cmd->add_option("--window", *window, "Seconds of the test split in the prediction figures")
       ->capture_default_str()
-      ->check(CLI::PositiveNumber);
+      ->check(finite_number(0.0, 1e6, true));
   cmd->add_option("--published", *published, "Folder of the paper's tables")->capture_default_str();
   cmd->callback([=] {
     for (const auto& f : *results) read_results(f);   // throws naming the file and line

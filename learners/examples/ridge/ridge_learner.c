@@ -9,9 +9,16 @@
 #include "spml/learner.h"
 
 typedef struct {
-  int32_t params;
+  int32_t params, inputs, outputs;
   double* theta;
 } ridge_state;
+
+/* 1 when all n values are finite: a fit on data holding NaN must be refused, not return NaN. */
+static int all_finite(const double* v, int64_t n) {
+  for (int64_t i = 0; i < n; ++i)
+    if (!isfinite(v[i])) return 0;
+  return 1;
+}
 
 static void* ridge_fit(const spml_learner_data* d, const spml_learner_model* model, const spml_learner_config* config,
                        char* error, size_t error_size) {
@@ -20,9 +27,18 @@ static void* ridge_fit(const spml_learner_data* d, const spml_learner_model* mod
     snprintf(error, error_size, "Ridge needs the dataset's parametric model");
     return NULL;
   }
-  double lambda = 1e-6;
+  if (!all_finite(d->x, d->rows * d->inputs) || !all_finite(d->y, d->rows * d->outputs) ||
+      !all_finite(d->phi, d->rows * d->outputs * d->params)) {
+    snprintf(error, error_size, "training data hold NaN or Inf values");
+    return NULL;
+  }
+  double lambda = NAN; /* the host fills the table's default in; checked against its bounds */
   for (int32_t i = 0; i < config->count; ++i)
-    if (strcmp(config->keys[i], "lambda") == 0) lambda = strtod(config->values[i], NULL); /* already checked by the host */
+    if (strcmp(config->keys[i], "lambda") == 0) lambda = strtod(config->values[i], NULL);
+  if (isnan(lambda)) {
+    snprintf(error, error_size, "config 'lambda' missing");
+    return NULL;
+  }
   const int32_t M = d->params;
   const int64_t rows = d->rows * d->outputs;
   double* A = calloc((size_t)(M * M), sizeof(double));
@@ -67,6 +83,8 @@ static void* ridge_fit(const spml_learner_data* d, const spml_learner_model* mod
   }
   free(A);
   s->params = M;
+  s->inputs = d->inputs;
+  s->outputs = d->outputs;
   s->theta = b;
   return s;
 }
@@ -75,6 +93,11 @@ static int ridge_predict(void* state, const spml_learner_data* q, double* mean, 
                          size_t error_size) {
   (void)variance;
   const ridge_state* s = state;
+  if (q->inputs != s->inputs || q->outputs != s->outputs) {
+    snprintf(error, error_size, "query has %d inputs and %d outputs, the fit had %d and %d", q->inputs, q->outputs,
+             s->inputs, s->outputs);
+    return 1;
+  }
   if (!q->phi || q->params != s->params) {
     snprintf(error, error_size, "query regressor has %d columns, expected %d", q->params, s->params);
     return 1;
@@ -109,5 +132,5 @@ static const spml_learner ridge = {
     SPML_LEARNER_USES_MODEL | SPML_LEARNER_PARAMETRIC | SPML_LEARNER_DETERMINISTIC, ridge_keys,
     ridge_fit, ridge_predict, NULL, ridge_coefficients, ridge_destroy};
 
-SPML_EXPORT int32_t spml_learner_abi_version(void) { return SPML_LEARNER_ABI_VERSION; }
-SPML_EXPORT const spml_learner* spml_learner_get(int32_t i) { return i == 0 ? &ridge : NULL; }
+/* spml_learner_abi_version() and spml_learner_get(i) over a table of one learner. */
+SPML_EXPORT_LEARNERS(&ridge, 1)

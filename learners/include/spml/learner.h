@@ -95,6 +95,19 @@ typedef struct spml_learner {
 
 #ifdef __cplusplus
 }
+#define SPML_LEARNER_EXTERN_C extern "C"
+#else
+#define SPML_LEARNER_EXTERN_C
 #endif
+
+/* The two entry points, for a library whose learners are `count` entries from `table` (an
+ * array, or any expression giving a pointer to the first: C or C++), e.g.
+ *   SPML_EXPORT_LEARNERS(my_learners, 2)      SPML_EXPORT_LEARNERS(list().data(), list().size())
+ * The twin of SPML_EXPORT_FORCE_PLUGIN; a helper only, the ABI is the two functions. */
+#define SPML_EXPORT_LEARNERS(table, count)                                                                   \
+  SPML_LEARNER_EXTERN_C SPML_EXPORT int32_t spml_learner_abi_version(void) { return SPML_LEARNER_ABI_VERSION; } \
+  SPML_LEARNER_EXTERN_C SPML_EXPORT const spml_learner* spml_learner_get(int32_t i) {                          \
+    return i >= 0 && (int64_t)i < (int64_t)(count) ? &(table)[i] : NULL;                                        \
+  }
 
 #endif /* SPML_LEARNER_H */

@@ -77,7 +77,8 @@ typedef struct spml_force_plugin {
   void (*set_params)(void* instance, const mjtNum* theta);
 
   /* Optional (NULL if the force is not linear in its parameters): write R, an
-   * m->nv x nparam row-major matrix with force = R(qpos, qvel) * theta. */
+   * m->nv x nparam row-major matrix with force = R(qpos, qvel) * theta. R arrives
+   * zeroed by the host: write only the entries of the joints the instance acts on. */
   void (*regressor)(const void* instance, const mjModel* m, const mjtNum* qpos,
                     const mjtNum* qvel, mjtNum* R);
 

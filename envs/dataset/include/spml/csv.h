@@ -17,7 +17,9 @@ struct CsvText {
 
 // Throws DatasetError naming the file and line: not a text file (NUL bytes, an HDF5 or
 // other binary file), no header, an empty or repeated header name, a row of another width.
-// Blank lines are skipped; cells are trimmed of surrounding spaces.
+// Blank lines are skipped; cells are trimmed of surrounding spaces; a cell in double quotes
+// may hold commas ("" is one quote, RFC 4180); a UTF-8 byte order mark before the header is
+// dropped.
 CsvText read_csv(const std::string& path);
 
 }  // namespace spml

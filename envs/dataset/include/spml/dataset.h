@@ -74,6 +74,10 @@ void validate(const Dataset& ds, const std::string& where, const ReadOptions& op
 // Writes atomically: the file appears complete under `path` or not at all.
 void write_dataset(const std::string& path, const Dataset& ds);
 
+// "" for valid UTF-8, else which byte is not (names and attributes must be UTF-8: the format
+// says so, and JSON outputs such as bench.json and report.json cannot hold anything else).
+std::string utf8_problem(const std::string& text);
+
 // Comma-separated list helpers used for the `columns` attribute.
 std::vector<std::string> split_list(const std::string& text, char sep = ',');
 std::string join_list(const std::vector<std::string>& items, char sep = ',');

@@ -14,6 +14,7 @@ struct Table {
   std::vector<std::string> names;
   std::vector<Eigen::VectorXd> columns;
   std::map<std::string, double> scalars; // 1x1 variables of a .mat file (gains, constants)
+  std::vector<std::string> left_out;     // .mat vectors of another length than the columns, "name (n samples)"
   Eigen::Index rows() const { return columns.empty() ? 0 : columns.front().size(); }
 };
 

@@ -33,6 +33,10 @@ struct Config {
   std::map<std::string, std::string> values;
   std::uint64_t seed = 0;
   explicit Config(const spml_learner_config* c);
+  // A key with a default in the learner's table: the host has filled it in (spml/plugin_loader.h,
+  // with_defaults), so a missing one is an error, naming the key. Defaults live in the table only.
+  double number(const std::string& key) const;
+  // A key whose default is worked out from the data (NULL in the table): `fallback` when not given.
   double number(const std::string& key, double fallback) const;   // throws naming the key
 };
 
@@ -44,18 +48,27 @@ class Learner {
   virtual void predict(const View& query, double* mean, double* var) const = 0;
   virtual Eigen::VectorXd coefficients() const { return {}; }
   std::string notes;
+  Eigen::Index fitted_inputs = 0, fitted_outputs = 0;   // set by the adapter: what predict must match
 };
 
 // Throws unless the host passed a regressor with the model's parameter count.
 void require_model(const View& data, const spml_learner_model& model, const char* learner);
+// The checks every learner needs, once (spml check-plugin's contract): fit data holding no NaN
+// or Inf, and a query as wide as the fit's data. Throw with the message the host shows.
+void require_finite_training_data(const View& train);
+void require_query_like_fit(const View& query, Eigen::Index inputs, Eigen::Index outputs);
 
 template <class T>
 struct Adapter {
   static void* fit(const spml_learner_data* train, const spml_learner_model* model, const spml_learner_config* config,
                    char* error, size_t error_size) {
     try {
+      const View data(*train);
+      require_finite_training_data(data);
       auto learner = std::make_unique<T>();
-      learner->fit(View(*train), *model, Config(config));
+      learner->fit(data, *model, Config(config));
+      learner->fitted_inputs = data.X.cols();
+      learner->fitted_outputs = data.outputs;
       return learner.release();
     } catch (const std::exception& e) {
       std::snprintf(error, error_size, "%s", e.what());
@@ -65,7 +78,10 @@ struct Adapter {
   static int predict(void* state, const spml_learner_data* query, double* mean, double* var, char* error,
                      size_t error_size) {
     try {
-      static_cast<const T*>(state)->predict(View(*query), mean, var);
+      const T& learner = *static_cast<const T*>(state);
+      const View q(*query);
+      require_query_like_fit(q, learner.fitted_inputs, learner.fitted_outputs);
+      learner.predict(q, mean, var);
       return 0;
     } catch (const std::exception& e) {
       std::snprintf(error, error_size, "%s", e.what());
@@ -86,11 +102,6 @@ spml_learner make_learner(const char* name, const char* summary, uint32_t flags,
   return spml_learner{SPML_LEARNER_ABI_VERSION, name, summary, flags, keys,
                       &Adapter<T>::fit, &Adapter<T>::predict, &Adapter<T>::notes,
                       &Adapter<T>::coefficients, &Adapter<T>::destroy};
-}
-
-// spml_learner_get's contract over a library's list: the index-th learner, NULL past the end.
-inline const spml_learner* learner_at(const std::vector<spml_learner>& list, int32_t index) {
-  return index >= 0 && static_cast<size_t>(index) < list.size() ? &list[static_cast<size_t>(index)] : nullptr;
 }
 
 }  // namespace spml::adapter

@@ -48,6 +48,11 @@ PluginCatalog& force_plugins();
 const spml_force_plugin& load_force_plugin(const std::string& type, const std::string& element = "");
 // Names of all plugins found.
 std::vector<std::string> available_force_plugins();
+// How force-plugin libraries are recognised (symbol prefix, ABI version, search folders).
+const PluginKind& force_plugin_kind();
+// "" for a descriptor the host can use, else what is wrong with it (required callbacks
+// missing, a shape parameter that is not a config key or has an invalid search range).
+std::string force_plugin_problem(const spml_force_plugin& plugin);
 
 // One instance of a plugin made outside a model's declarations (diagnose's candidates): the
 // configuration is checked against the plugin's key table and completed with its defaults
@@ -85,11 +90,14 @@ class ForceEffects {
   ForceEffects(const ForceEffects&) = delete;
   ForceEffects& operator=(const ForceEffects&) = delete;
 
+  // One declared instance; owns its plugin state (released when the effects are, or when a
+  // later declaration fails to create).
   struct Instance {
     PluginDeclaration decl;
-    const spml_force_plugin* plugin;
-    void* state;
+    PluginInstance object;
     int param_offset, nparam;
+    const spml_force_plugin& plugin() const { return object.plugin(); }
+    void* state() const { return object.state(); }
   };
 
   const std::vector<Instance>& instances() const { return instances_; }

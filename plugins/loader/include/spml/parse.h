@@ -8,6 +8,7 @@
 #include <charconv>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <cstdlib>
 #include <optional>
 #include <string>
@@ -67,6 +68,17 @@ inline std::string exact_text(double v) {
   char buf[32];
   const auto r = std::to_chars(buf, buf + sizeof buf, v);
   return std::string(buf, r.ptr);
+}
+
+// v for people (reports, tables, messages): `digits` significant digits as printf's %g, or
+// with `fixed` that many after the point; "inf", "-inf", "nan" spelled out. For text that is
+// read back, exact_text.
+inline std::string number_text(double v, int digits = 6, bool fixed = false) {
+  if (std::isnan(v)) return "nan";
+  if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
+  char buf[64];
+  std::snprintf(buf, sizeof buf, fixed ? "%.*f" : "%.*g", digits, v);
+  return buf;
 }
 
 }  // namespace spml

@@ -16,6 +16,7 @@
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "spml/abi.h"
@@ -96,6 +97,10 @@ class PluginCatalog {
 std::string check_config_value(const spml_config_key& key, const std::string& value);
 // The key named `name` in a {NULL}-terminated table, or nullptr.
 const spml_config_key* find_config_key(const spml_config_key* table, const std::string& name);
+// `given` followed by every key of `table` that it leaves out and that has a default (the
+// one place defaults are filled in, for both plugin kinds: a key without a default stays out).
+std::vector<std::pair<std::string, std::string>> with_defaults(const spml_config_key* table,
+                                                               std::vector<std::pair<std::string, std::string>> given);
 // "a, b, c" of a table, for messages.
 std::string config_key_list(const spml_config_key* table);
 

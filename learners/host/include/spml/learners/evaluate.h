@@ -40,6 +40,13 @@ struct BenchOptions {
   // already present in out/units and left alone otherwise.
   int shard = 1, shards = 1;
   bool reuse_only = false;          // fit nothing: every unit must already be in out/units (merge)
+  // merge: the shard folders, shard k's at k - 1; unit u is read from folder u % size() (the
+  // shard that fitted it) and copied into out/units. Empty: units are read from out/units.
+  std::vector<std::string> unit_sources;
+
+  // Throws LearnerError naming the option (as the command line spells it) when a value is out
+  // of range; run_bench() calls it, and so does `spml bench` before it loads anything.
+  void check() const;
 };
 
 struct BenchReport {
@@ -60,7 +67,9 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& optio
 
 // Builds in `out` what one unsharded `spml bench` would have written, from the shard folders
 // of one sharded run: checks that their bench.json agree (data, settings, learners), copies
-// their units into out/units and aggregates them without fitting anything. Throws naming
+// each unit from the folder of the shard that fitted it into out/units (stale units another
+// folder holds are ignored) and aggregates them without fitting anything. `out` must not be
+// one of the shard folders. Throws naming
 // the folder, field or unit that is missing or disagrees.
 BenchReport merge_bench(const LearnerRegistry& registry, const std::vector<std::string>& shard_dirs,
                         const std::string& out, const std::function<void(const std::string&)>& log);

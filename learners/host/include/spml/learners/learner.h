@@ -62,6 +62,11 @@ class Learner {
   bool uses_model() const { return flags() & SPML_LEARNER_USES_MODEL; }
 };
 
+// How learner libraries are recognised (symbol prefix, ABI version, search folders).
+const PluginKind& learner_plugin_kind();
+// "" for a table entry the host can use, else what is wrong with it (a required callback missing).
+std::string learner_problem(const spml_learner& learner);
+
 // All learners found on the search path (spml/plugin_loader.h), plus their compositions.
 class LearnerRegistry {
  public:

@@ -34,16 +34,28 @@ struct Joint {
   int id, qpos, dof;
 };
 
+// "joint 3 'elbow' (hinge)" or "joint 0 (free, unnamed)" for messages: mj_id2name gives NULL
+// for an unnamed joint, and a free joint has no name unless the MJCF gives one.
+inline std::string describe_joint(const mjModel* m, int j) {
+  static const char* const kTypes[] = {"free", "ball", "slide", "hinge"};
+  const int type = m->jnt_type[j];
+  const std::string kind = type >= 0 && type < 4 ? kTypes[type] : "type " + std::to_string(type);
+  const char* name = mj_id2name(m, mjOBJ_JOINT, j);
+  return "joint " + std::to_string(j) + (name && *name ? " '" + std::string(name) + "' (" + kind + ")" : " (" + kind + ", unnamed)");
+}
+
 class EffectConfig {
  public:
   EffectConfig(const mjModel* m, const int* joints, int njoint, const char* const* keys,
                const char* const* values, int nkv) {
     for (int i = 0; i < njoint; ++i) {
-      int j = joints[i];
+      const int j = joints[i];
+      if (j < 0 || j >= m->njnt) throw std::invalid_argument("joint index " + std::to_string(j) + " is not in the model");
+      const char* name = mj_id2name(m, mjOBJ_JOINT, j);   // NULL for an unnamed joint
       if (m->jnt_type[j] != mjJNT_HINGE && m->jnt_type[j] != mjJNT_SLIDE)
-        throw std::invalid_argument("joint '" + std::string(mj_id2name(m, mjOBJ_JOINT, j)) +
-                                    "' is not a hinge or slide joint");
-      this->joints.push_back({mj_id2name(m, mjOBJ_JOINT, j), j, m->jnt_qposadr[j], m->jnt_dofadr[j]});
+        throw std::invalid_argument(describe_joint(m, j) + " is not a hinge or slide joint");
+      if (!name || !*name) throw std::invalid_argument(describe_joint(m, j) + " has no name; effects act on named joints");
+      this->joints.push_back({name, j, m->jnt_qposadr[j], m->jnt_dofadr[j]});
     }
     for (int i = 0; i < nkv; ++i) kv_.emplace_back(keys[i], values[i]);
   }

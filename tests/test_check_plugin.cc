@@ -1,0 +1,119 @@
+// spml check-plugin (issue #25): every in-tree library passes (CheckPluginInTree, a script),
+// and each deliberately broken plugin is refused with exit 1, the clause it breaks named.
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <regex>
+#include <string>
+
+#include "spml/check_plugin.h"
+#include "test_util.h"
+
+namespace {
+
+using spml::test::run;
+
+bool has(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
+bool contains(const std::vector<std::string>& v, const std::string& x) { return std::find(v.begin(), v.end(), x) != v.end(); }
+
+std::string broken(const std::string& name) { return std::string(SPML_BROKEN_DIR) + "/" + name + ".so"; }
+
+spml::test::RunResult check(const std::string& file) { return run(spml::test::spml_bin() + " check-plugin " + file); }
+
+// The FAIL lines of an output, one per failed clause: "FAIL  <plugin>  <clause>: ...".
+std::vector<std::string> failed_clauses(const std::string& output) {
+  std::vector<std::string> out;
+  const std::regex line("FAIL  (\\S+)  ([a-z-]+)");
+  for (auto it = std::sregex_iterator(output.begin(), output.end(), line); it != std::sregex_iterator(); ++it)
+    out.push_back((*it)[1].str() + " " + (*it)[2].str());
+  return out;
+}
+
+void expect_only_failure(const std::string& fixture, const std::string& clause) {
+  const auto r = check(broken(fixture));
+  SCOPED_TRACE(r.output);
+  std::printf("%s:\n", fixture.c_str());
+  for (const auto& c : failed_clauses(r.output)) {
+    const auto at = r.output.find("FAIL  " + c.substr(0, c.find(' ')) + "  " + c.substr(c.find(' ') + 1));
+    std::printf("  %s\n", r.output.substr(at, r.output.find('\n', at) - at).c_str());
+  }
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(has(r.output, "spml: error: check-plugin: 1 of "));
+  const auto failed = failed_clauses(r.output);
+  ASSERT_EQ(failed.size(), 1u);
+  EXPECT_TRUE(has(failed[0], clause));
+}
+
+TEST(CheckPlugin, PassesTheUnbrokenFixtures) {
+  for (const char* f : {"learner_none", "force_none"}) {
+    const auto r = check(broken(f));
+    EXPECT_EQ(r.exit_code, 0) << r.output;
+    EXPECT_TRUE(failed_clauses(r.output).empty()) << r.output;
+    EXPECT_TRUE(has(r.output, "0 failed"));
+  }
+}
+
+TEST(CheckPlugin, RefusesALearnerClaimingDeterminismThatDiffersBetweenFits) {
+  expect_only_failure("learner_deterministic", "SmallRidge deterministic");
+}
+TEST(CheckPlugin, RefusesNegativeVariances) { expect_only_failure("learner_variance", "SmallRidge variance-positive"); }
+TEST(CheckPlugin, RefusesOutputsLeftUnwritten) { expect_only_failure("learner_unwritten", "SmallRidge outputs-written"); }
+TEST(CheckPlugin, RefusesADefaultOutsideItsBounds) {
+  expect_only_failure("learner_default", "SmallRidge key-table");
+  EXPECT_TRUE(has(check(broken("learner_default")).output, "key 'lambda': default '5' is outside [0, 1]"));
+}
+TEST(CheckPlugin, RefusesARegressorThatDoesNotReproduceTheForce) {
+  expect_only_failure("force_regressor", "broken_viscous regressor");
+}
+TEST(CheckPlugin, RefusesAWriteConfigThatDoesNotRecreateThePlugin) {
+  expect_only_failure("force_write_config", "broken_viscous write-config");
+}
+
+// Hidden state shows in every clause that calls compute twice; the one it breaks is named.
+TEST(CheckPlugin, RefusesHiddenStateInAPluginDeclaringNone) {
+  const auto r = check(broken("force_hidden_state"));
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_TRUE(contains(failed_clauses(r.output), "broken_viscous no-hidden-state")) << r.output;
+  const auto at = r.output.find("FAIL  broken_viscous  no-hidden-state");
+  std::printf("force_hidden_state:\n  %s\n", r.output.substr(at, r.output.find('\n', at) - at).c_str());
+}
+
+TEST(CheckPlugin, RefusesLibrariesThatAreNoPluginOrSpeakAnotherAbi) {
+  const std::string dir = SPML_BROKEN_DIR;
+  const auto wrong = check(dir + "/../test-learners/wrong_abi_learner.so");
+  EXPECT_EQ(wrong.exit_code, 1);
+  EXPECT_TRUE(has(wrong.output, "FAIL  (library)  abi-version"));
+  EXPECT_TRUE(has(wrong.output, "learner ABI version"));
+  const auto none = check(dir + "/../test-learners/not_a_learner.so");
+  EXPECT_EQ(none.exit_code, 1);
+  EXPECT_TRUE(has(none.output, "FAIL  (library)  abi-version"));
+}
+
+TEST(CheckPlugin, JsonCountsTheFailures) {
+  const auto r = run(spml::test::spml_bin() + " check-plugin --json " + broken("learner_variance") + " " + broken("force_none") +
+                     "");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(has(r.output, "spml: error: check-plugin: 1 of ")) << r.output;
+  const auto j = nlohmann::json::parse(r.output.substr(0, r.output.rfind('}') + 1));   // then stderr's error line
+  EXPECT_EQ(j["failed"], 1);
+  ASSERT_EQ(j["libraries"].size(), 2u);
+  EXPECT_EQ(j["libraries"][0]["kind"], "learner");
+  EXPECT_EQ(j["libraries"][0]["passed"], false);
+  EXPECT_EQ(j["libraries"][1]["kind"], "force plugin");
+  EXPECT_EQ(j["libraries"][1]["passed"], true);
+}
+
+// The library API gives the same verdicts as the command.
+TEST(CheckPlugin, LibraryApiReportsEveryClause) {
+  const auto r = spml::check::check_library(broken("force_none"));
+  EXPECT_TRUE(r.passed());
+  EXPECT_EQ(r.kind, "force plugin");
+  std::vector<std::string> names;
+  for (const auto& c : r.clauses) names.push_back(c.name);
+  for (const char* clause : {"abi-version", "names", "shape-params", "callbacks", "key-table", "create", "finite-force",
+                             "no-hidden-state", "regressor", "params-roundtrip", "write-config", "reset"})
+    EXPECT_TRUE(contains(names, clause)) << clause;
+}
+
+}  // namespace
