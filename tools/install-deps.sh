@@ -14,6 +14,7 @@ packages=(
   libtinyxml2-dev                      # editing MJCF files (spml diagnose writes the extended model)
   libopenblas-dev                      # LAPACK for the GP learners
   libgtest-dev libgmock-dev libbenchmark-dev
+  pybind11-dev python3-pybind11 python3-dev   # the Python module spml (tools/python)
   libtorch-dev                         # BNN, BaMbANN (learners/torch)
   python3-h5py python3-numpy python3-scipy python3-sklearn python3-matplotlib
   python3-torch                        # the PyTorch peer of the BNN benchmark

@@ -1,0 +1,77 @@
+// spml diagnose from Python: the report.json contents as a dict (and, with out=, every file
+// the command writes there except the plots).
+#include <pybind11/stl.h>
+
+#include "convert.h"
+#include "spml/diagnose.h"
+
+namespace spml::py {
+namespace {
+
+// The bounds `spml diagnose` puts on its options, so a value the command line refuses is
+// refused here too (the library takes the numbers as given).
+void check_range(const char* name, double v, double lo, double hi) {
+  if (!(v >= lo && v <= hi))
+    throw BadArgument("diagnose: " + std::string(name) + "=" + std::to_string(v) + " is outside [" + std::to_string(lo) + ", " +
+                      std::to_string(hi) + "]");
+}
+
+void check(const DiagnoseOptions& o) {
+  check_range("holdout", o.holdout, 0.05, 0.9);
+  check_range("bic_threshold", o.bic_threshold, 0, 1e9);
+  check_range("min_gain", o.min_gain, 0, 1);
+  check_range("max_causes", o.max_causes, 1, 1000);
+  check_range("still_speed", o.still_speed, 0, 1e9);
+  check_range("rollout_seconds", o.rollout_seconds, 1e-3, 10);
+  check_range("rollouts", o.rollouts, 0, 10000);
+}
+
+pb::object run(const std::string& model, const std::string& data, const std::string& out, const DiagnoseOptions& settings,
+               const std::vector<std::string>& plugin_path) {
+  add_plugin_paths(plugin_path);
+  DiagnoseOptions o = settings;
+  o.model = model;
+  o.data = data;
+  check(o);
+  DiagnoseResult r;
+  {
+    pb::gil_scoped_release release;
+    std::vector<std::string> inputs{model, data};
+    inputs.insert(inputs.end(), o.cross.begin(), o.cross.end());
+    r = naming_missing_files(inputs, [&] { return diagnose(o, out); });
+  }
+  // report.json's own text, parsed by Python's json: the dict is exactly the file's contents.
+  return pb::module_::import("json").attr("loads")(r.report.dump());
+}
+
+}  // namespace
+
+void bind_diagnose(pb::module_& m) {
+  const DiagnoseOptions d;   // the library's defaults are the module's
+  m.def(
+      "diagnose",
+      [](const std::string& model, const std::string& data, const std::string& out, const std::string& fit_split,
+         const std::string& test_split, double holdout, double bic_threshold, double min_gain, int max_causes,
+         double still_speed, double rollout_seconds, int rollouts, const std::vector<std::string>& cross,
+         const std::vector<std::string>& plugin_path) {
+        DiagnoseOptions o;
+        o.fit_split = fit_split;
+        o.test_split = test_split;
+        o.holdout = holdout;
+        o.bic_threshold = bic_threshold;
+        o.min_gain = min_gain;
+        o.max_causes = max_causes;
+        o.still_speed = still_speed;
+        o.rollout_seconds = rollout_seconds;
+        o.rollouts = rollouts;
+        o.cross = cross;
+        return run(model, data, out, o, plugin_path);
+      },
+      pb::arg("model"), pb::arg("data"), pb::arg("out") = "", pb::arg("fit_split") = d.fit_split, pb::arg("test_split") = d.test_split,
+      pb::arg("holdout") = d.holdout, pb::arg("bic_threshold") = d.bic_threshold, pb::arg("min_gain") = d.min_gain,
+      pb::arg("max_causes") = d.max_causes, pb::arg("still_speed") = d.still_speed,
+      pb::arg("rollout_seconds") = d.rollout_seconds, pb::arg("rollouts") = d.rollouts,
+      pb::arg("cross") = std::vector<std::string>{}, pb::arg("plugin_path") = std::vector<std::string>{});
+}
+
+}  // namespace spml::py
