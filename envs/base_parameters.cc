@@ -174,8 +174,8 @@ std::string rank_decision_warning(const MjcfRegressor::Base& base) {
   return "the base-parameter rank is a close call: a singular value lies within a factor " +
          number_text(MjcfRegressor::kCloseCall, 4) + " of the tolerance " + number_text(base.tolerance, 4) +
          " (smallest kept " + number_text(base.smallest_kept, 4) + ", largest dropped " + number_text(base.largest_dropped, 4) +
-         "); parameters near that size are barely determined by torques, and the rank may differ with the model's "
-         "rounding or units of its angles";
+         "): combinations that weak are barely determined by torques, and another rounding of the model's angles "
+         "could change the rank (README, \"Base parameters\")";
 }
 
 }  // namespace spml
