@@ -4,8 +4,6 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <random>
-#include <sstream>
 
 #include "spml/parse.h"
 
@@ -39,6 +37,25 @@ Eigen::Matrix<double, 6, 10> body_wrench(const Eigen::Vector3d& w, const Eigen::
   return A;
 }
 
+// Joint j's name, or an error naming its index, type and body: the regressor takes hinge and
+// slide joints, and names parameters and data columns (q:<joint>) after them.
+std::string checked_joint_name(const mjModel* m, int j, const std::string& file) {
+  static const char* kType[4] = {"free", "ball", "slide", "hinge"};
+  const int type = m->jnt_type[j];
+  const char* name = mj_id2name(m, mjOBJ_JOINT, j);
+  const char* body = mj_id2name(m, mjOBJ_BODY, m->jnt_bodyid[j]);
+  const std::string which = "joint " + std::to_string(j) + " (" + (type >= 0 && type < 4 ? kType[type] : "unknown") +
+                            (name ? ", '" + std::string(name) + "'" : std::string(", unnamed")) + ", in body " +
+                            (body ? "'" + std::string(body) + "'" : "#" + std::to_string(m->jnt_bodyid[j])) + ")";
+  if (type != mjJNT_HINGE && type != mjJNT_SLIDE)
+    throw std::runtime_error(file + ": " + which + ": the regressor supports hinge and slide joints only (a free or ball "
+                                                   "joint has no single-axis torque to identify)");
+  if (!name || !*name)
+    throw std::runtime_error(file + ": " + which + " has no name: parameters and data columns (q:<joint>, tau:<joint>) are "
+                                                   "named after joints; give it name=\"...\"");
+  return name;
+}
+
 }  // namespace
 
 MjcfRegressor::MjcfRegressor(const std::string& mjcf_file, const RegressorOptions& options)
@@ -47,12 +64,8 @@ MjcfRegressor::MjcfRegressor(const std::string& mjcf_file, const RegressorOption
   if (m->njnt == 0)
     throw std::runtime_error(mjcf_file + ": the model has no joints, so there is nothing to identify (a regressor "
                                          "needs at least one hinge or slide joint)");
-  for (int j = 0; j < m->njnt; ++j)
-    if (m->jnt_type[j] != mjJNT_HINGE && m->jnt_type[j] != mjJNT_SLIDE)
-      throw std::runtime_error(mjcf_file + ": joint '" + mj_id2name(m, mjOBJ_JOINT, j) +
-                               "' is a free or ball joint; the regressor supports hinge and slide joints");
+  for (int j = 0; j < m->njnt; ++j) joints_.push_back(checked_joint_name(m, j, mjcf_file));
   effects_ = std::make_unique<ForceEffects>(m, mjcf_file);
-  for (int j = 0; j < m->njnt; ++j) joints_.push_back(mj_id2name(m, mjOBJ_JOINT, j));
   std::vector<double> values;
   static const char* kBody[10] = {"m", "mx", "my", "mz", "Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz"};
   for (int b = 1; b < m->nbody; ++b) {
@@ -160,68 +173,6 @@ Eigen::MatrixXd MjcfRegressor::evaluate(Workspace& ws, const Eigen::VectorXd& q,
   }
   if (col < Y.cols()) Y.rightCols(Y.cols() - col) = -effects_->linear_regressor(d->qpos, d->qvel);
   return Y;
-}
-
-Eigen::MatrixXd MjcfRegressor::Base::Y_base(const Eigen::MatrixXd& Y) const {
-  Eigen::MatrixXd out(Y.rows(), rank);
-  for (int i = 0; i < rank; ++i) out.col(i) = Y.col(independent[i]);
-  return out;
-}
-
-MjcfRegressor::Base MjcfRegressor::base_parameters(int samples, std::uint64_t seed) const {
-  const mjModel* m = m_.get();
-  std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  const int nv = m->nv, np = static_cast<int>(names_.size());
-  Eigen::MatrixXd W(static_cast<Eigen::Index>(samples) * nv, np);
-  Eigen::VectorXd q(m->njnt), qd(m->njnt), qdd(m->njnt);
-  Workspace ws = workspace();
-  for (int s = 0; s < samples; ++s) {
-    for (int j = 0; j < m->njnt; ++j) {
-      double lo = -M_PI, hi = M_PI;
-      if (m->jnt_limited[j]) lo = m->jnt_range[2 * j], hi = m->jnt_range[2 * j + 1];
-      else if (m->jnt_type[j] == mjJNT_SLIDE) lo = -1, hi = 1;
-      q[j] = lo + (hi - lo) * 0.5 * (u(rng) + 1);
-      qd[j] = 3 * u(rng);
-      qdd[j] = 10 * u(rng);
-    }
-    W.middleRows(static_cast<Eigen::Index>(s) * nv, nv) = evaluate(ws, q, qd, qdd);
-  }
-  // Scale columns to unit norm so the rank decision does not depend on units.
-  Eigen::VectorXd scale = W.colwise().norm().transpose();
-  for (int c = 0; c < np; ++c) if (scale[c] > 0) W.col(c) /= scale[c];
-  Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(W);
-  Base base;
-  // Threshold: relative to the largest pivot, well above double rounding over this many rows.
-  base.tolerance = 1e-8;
-  qr.setThreshold(base.tolerance);
-  base.rank = static_cast<int>(qr.rank());
-  const auto& perm = qr.colsPermutation().indices();
-  for (int i = 0; i < np; ++i) (i < base.rank ? base.independent : base.dependent).push_back(perm[i]);
-  Eigen::MatrixXd R = qr.matrixR().topRows(base.rank).template triangularView<Eigen::Upper>();
-  Eigen::MatrixXd R11 = R.leftCols(base.rank), R12 = R.rightCols(np - base.rank);
-  Eigen::MatrixXd K = R11.triangularView<Eigen::Upper>().solve(R12);   // scaled units
-  base.Kd.resize(base.rank, np - base.rank);
-  for (int i = 0; i < base.rank; ++i)
-    for (int k = 0; k < np - base.rank; ++k) {
-      double v = K(i, k) * scale[base.dependent[k]] / scale[base.independent[i]];
-      base.Kd(i, k) = std::fabs(v) < 1e-9 ? 0.0 : v;
-    }
-  base.model_values.resize(base.rank);
-  for (int i = 0; i < base.rank; ++i) {
-    std::string name = names_[base.independent[i]];
-    double value = pi_[base.independent[i]];
-    for (int k = 0; k < np - base.rank; ++k) {
-      double c = base.Kd(i, k);
-      if (c == 0) continue;
-      bool unit = std::fabs(std::fabs(c) - 1.0) < 1e-9;
-      name += (c > 0 ? " + " : " - ") + (unit ? std::string() : number_text(std::fabs(c), 4) + "*") + names_[base.dependent[k]];
-      value += c * pi_[base.dependent[k]];
-    }
-    base.names.push_back(name);
-    base.model_values[i] = value;
-  }
-  return base;
 }
 
 JointColumns::JointColumns(const MjcfRegressor& reg, const Split& s) {

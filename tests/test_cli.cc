@@ -167,7 +167,7 @@ TEST(CliRegressor, ArmHasSeventeenBaseParameters) {
   // ZZR1 of the paper: link 0's inertia about its joint plus armature and the outer masses.
   bool found = false;
   for (size_t i = 0; i < j["names"].size(); ++i)
-    if (j["names"][i] == "Iyy:link0 + m:link2 + m:link1 + armature:joint0") {
+    if (j["names"][i] == "Iyy:link0 + m:link1 + m:link2 + armature:joint0") {
       found = true;
       EXPECT_NEAR(j["prior"][i].get<double>(), 9.43, 1e-9);
     }

@@ -1,10 +1,18 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
+#include <cmath>
 #include <fstream>
+#include <functional>
+#include <limits>
+#include <nlohmann/json.hpp>
 #include <random>
+#include <regex>
+#include <sstream>
+#include <tuple>
 
 #include "spml/envs/mjcf_regressor.h"
+#include "spml/parse.h"
 #include "spml/envs/planar_arm3.h"
 #include "spml/envs/scenarios.h"
 #include "test_util.h"
@@ -167,4 +175,294 @@ TEST(MjcfRegressor, IdentifyRecoversKnownParameters) {
   } catch (const DatasetError& e) {
     EXPECT_NE(std::string(e.what()).find("split 'train': no input column 'qdd:joint1' for model joint 'joint1'"), std::string::npos) << e.what();
   }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Base parameters of real robot descriptions (issue #26).
+
+namespace {
+
+// Shared files beside the clone: $SPML_SHARED_DATA (default ../shared/data) for the Panda,
+// $SPML_SHARED_MODELS (default ../shared/models) for vendor robot files.
+std::string shared(const char* env, const char* fallback) {
+  const char* v = std::getenv(env);
+  return v && *v ? v : std::string(SPML_SOURCE_DIR) + fallback;
+}
+std::string panda_file() { return shared("SPML_SHARED_DATA", "/../shared/data") + "/panda/panda_nohand.xml"; }
+std::string gen3_file() { return shared("SPML_SHARED_MODELS", "/../shared/models") + "/kinova_gen3/gen3.urdf"; }
+
+std::string read_text(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+std::string map_numbers(const std::string& list, const std::function<double(double)>& f) {
+  std::istringstream in(list);
+  std::string out;
+  for (double v; in >> v;) out += (out.empty() ? "" : " ") + exact_text(f(v));
+  return out;
+}
+
+// The file with every angle passed through f: URDF rpy and MJCF euler values, and MJCF quats,
+// which become axisangle with the angle passed through f (radians; degrees where the file
+// keeps MuJoCo's default angle unit).
+std::string map_angles(const std::string& xml, const std::function<double(double)>& f) {
+  const bool radian = xml.find("angle=\"radian\"") != std::string::npos;
+  std::string out;
+  const std::regex attr("(rpy|euler|quat)=\"([^\"]*)\"");
+  auto it = std::sregex_iterator(xml.begin(), xml.end(), attr);
+  size_t last = 0;
+  for (; it != std::sregex_iterator(); ++it) {
+    const auto& m = *it;
+    out += xml.substr(last, static_cast<size_t>(m.position()) - last);
+    last = static_cast<size_t>(m.position() + m.length());
+    if (m[1] != "quat") {
+      out += m[1].str() + "=\"" + map_numbers(m[2], f) + "\"";
+      continue;
+    }
+    std::istringstream in(m[2]);
+    Eigen::Vector4d q;
+    in >> q[0] >> q[1] >> q[2] >> q[3];
+    q.normalize();
+    const Eigen::Vector3d v = q.tail<3>();
+    if (v.norm() == 0) { out += "quat=\"1 0 0 0\""; continue; }
+    const double angle = f(2 * std::atan2(v.norm(), q[0]));
+    const Eigen::Vector3d axis = v.normalized();
+    out += "axisangle=\"" + exact_text(axis.x()) + " " + exact_text(axis.y()) + " " + exact_text(axis.z()) + " " +
+           exact_text(radian ? angle : angle * 180 / M_PI) + "\"";
+  }
+  return out + xml.substr(last);
+}
+
+double round4(double v) { return std::round(v * 1e4) / 1e4; }
+// What a rounded angle stood for: a multiple of pi/2 within 1e-3, else the value itself.
+double exact_right_angle(double v) {
+  const double k = std::round(v / M_PI_2);
+  return std::fabs(v - k * M_PI_2) < 1e-3 ? k * M_PI_2 : v;
+}
+
+// `xml` written as `name` in a temporary folder (beside nothing: the models used here
+// reference no other files).
+std::string write_model(const std::string& name, const std::string& xml) {
+  const auto path = (test::temp_dir("base") / name).string();
+  std::ofstream(path) << xml;
+  return path;
+}
+
+// Checks of issue #26 on one description: base values within 10x the largest standard
+// parameter, coefficients within 1e3, and a clear decision.
+void expect_sane_base(const MjcfRegressor& reg, const MjcfRegressor::Base& base, const std::string& what) {
+  const double largest = reg.model_params().cwiseAbs().maxCoeff();
+  EXPECT_LE(base.model_values.cwiseAbs().maxCoeff(), 10 * largest) << what;
+  if (base.Kd.size()) {
+    EXPECT_LE(base.Kd.cwiseAbs().maxCoeff(), 1e3) << what;
+  }
+  EXPECT_FALSE(base.close_call()) << what << ": " << rank_decision_text(base, reg.param_names().size());
+  std::cout << what << ": " << rank_decision_text(base, reg.param_names().size()) << "; largest |base value| "
+            << base.model_values.cwiseAbs().maxCoeff() << ", largest |coefficient| "
+            << (base.Kd.size() ? base.Kd.cwiseAbs().maxCoeff() : 0.0) << "\n";
+}
+
+}  // namespace
+
+// The vendor's Gen3 file rotates its joint frames by 1.5708 and 3.1416; with the exact
+// angles it is the same robot and must have the same base parameters' count.
+TEST(BaseParameters, Gen3AsShippedAndWithExactAnglesAgree) {
+  if (!std::filesystem::exists(gen3_file())) GTEST_SKIP() << "Gen3 model not found at " << gen3_file() << " (set SPML_SHARED_MODELS)";
+  MjcfRegressor shipped(gen3_file());
+  MjcfRegressor exact(write_model("gen3_exact.urdf", map_angles(read_text(gen3_file()), exact_right_angle)));
+  const auto bs = shipped.base_parameters(), be = exact.base_parameters();
+  EXPECT_EQ(bs.rank, be.rank);
+  expect_sane_base(shipped, bs, "gen3.urdf as shipped");
+  expect_sane_base(exact, be, "gen3.urdf, exact angles");
+}
+
+// Rounding every angle to 4 decimals, as URDF exporters do, leaves the rank as it is.
+TEST(BaseParameters, RoundingAnglesToFourDecimalsKeepsTheRank) {
+  std::vector<std::string> files = {mjcf_path("planar_arm3.xml"), mjcf_path("planar_arm3_ll.xml"),
+                                    mjcf_path("planar_arm3_gl.xml"), mjcf_path("via_joint.xml")};
+  for (const auto& f : {panda_file(), gen3_file()}) {
+    if (std::filesystem::exists(f)) files.push_back(f);
+    else std::cout << "not found, not checked: " << f << " (set SPML_SHARED_DATA / SPML_SHARED_MODELS)\n";
+  }
+  files.push_back(write_model("branched.xml", kBranched));
+  for (const auto& file : files) {
+    const std::string text = read_text(file), rounded = map_angles(text, round4);
+    const std::string name = std::filesystem::path(file).filename().string();
+    // Files without angles (the arm and the VIA joint set axes only) are their own rounding.
+    const std::string other = rounded == text ? file : write_model("rounded_" + name, rounded);
+    MjcfRegressor a(file), b(other);
+    const auto ba = a.base_parameters(), bb = b.base_parameters();
+    EXPECT_EQ(ba.rank, bb.rank) << name;
+    expect_sane_base(a, ba, name);
+    expect_sane_base(b, bb, name + ", angles rounded to 4 decimals");
+  }
+}
+
+namespace {
+
+// An n-link chain whose joint axes are parallel in exact arithmetic, horizontal, under
+// gravity; every second link is flipped about its x axis by `flip` (pi, or 3.1416 as a
+// rounded file has it, which tilts that axis by 7e-6 rad).
+std::string planar_chain(int n, const std::string& flip) {
+  std::string xml = "<mujoco><compiler angle=\"radian\"/><worldbody><body name=\"b0\" euler=\"1.5708 0 0\">";
+  for (int i = 0; i < n; ++i) {
+    if (i > 0) xml += "<body name=\"b" + std::to_string(i) + "\" pos=\"0.4 0 0\"" + (i % 2 ? " euler=\"" + flip + " 0 0\"" : "") + ">";
+    xml += "<joint name=\"j" + std::to_string(i) + "\" axis=\"0 0 1\" damping=\"0.5\" armature=\"0.01\"/>"
+           "<inertial pos=\"0.2 0.03 0.01\" mass=\"" + std::to_string(1.0 + 0.3 * i) +
+           "\" fullinertia=\"0.02 0.03 0.025 0.001 0.002 0.003\"/>";
+  }
+  for (int i = 0; i < n; ++i) xml += "</body>";
+  return xml + "</worldbody></mujoco>";
+}
+
+// Two hinges, the first vertical, the second horizontal through the same point; `angle` turns
+// the second body's frame (pi/2 exact, or 1.5708).
+std::string rr_arm(const std::string& angle) {
+  return "<mujoco><compiler angle=\"radian\"/><worldbody><body name=\"b1\" pos=\"0 0 0.3\">"
+         "<joint name=\"j1\" axis=\"0 0 1\" damping=\"0.5\"/>"
+         "<inertial pos=\"0.01 0.02 0.05\" mass=\"2\" fullinertia=\"0.02 0.03 0.025 0.001 0.002 0.003\"/>"
+         "<body name=\"b2\" pos=\"0 0 0.1\" euler=\"" + angle + " 0 0\"><joint name=\"j2\" axis=\"0 0 1\" damping=\"0.5\"/>"
+         "<inertial pos=\"0.2 0.03 0.01\" mass=\"1.5\" fullinertia=\"0.02 0.03 0.025 0.001 0.002 0.003\"/>"
+         "</body></body></worldbody></mujoco>";
+}
+
+int rank_of(const std::string& name, const std::string& xml) {
+  MjcfRegressor reg(write_model(name, xml));
+  const auto base = reg.base_parameters();
+  expect_sane_base(reg, base, name);
+  return base.rank;
+}
+
+}  // namespace
+
+// Counts the closed-form regrouping of Gautier & Khalil (1990) gives. An n-link chain with
+// parallel horizontal axes identifies per link ZZR, MXR, MY (its motion is planar), and per
+// joint damping, Coulomb and armature, the first joint's armature grouped into ZZR1: 6n - 1.
+// An RR arm, vertical then horizontal axis through one point: link 1 only ZZR1; link 2
+// XXR2 = XX2 - YY2, XY2, XZ2, YZ2, MX2, MY2 and ZZ2, which turns at q2' only (the axes are
+// perpendicular), so it is grouped with armature 2 as armature 1 is with ZZR1; M2 and MZ2
+// act through the fixed intersection point and drop out: 8 inertial + 2 damping + 2 Coulomb.
+TEST(BaseParameters, CountsMatchGautierKhalilRegrouping) {
+  const std::string pi = exact_text(M_PI), half = exact_text(M_PI_2);
+  for (int n = 1; n <= 5; ++n) {
+    EXPECT_EQ(rank_of("chain_exact.xml", planar_chain(n, pi)), 6 * n - 1) << n << " links";
+    EXPECT_EQ(rank_of("chain_rounded.xml", planar_chain(n, "3.1416")), 6 * n - 1) << n << " links, rounded";
+  }
+  EXPECT_EQ(rank_of("rr_exact.xml", rr_arm(half)), 12);
+  EXPECT_EQ(rank_of("rr_rounded.xml", rr_arm("1.5708")), 12);
+}
+
+namespace {
+
+// Exact torques of `file` (MuJoCo's inverse dynamics at random states within its joint
+// ranges) as a dataset with train and test splits.
+Dataset simulated(const MjcfRegressor& reg, const std::string& file, int rows) {
+  ModelPtr m = load_mjcf(file);
+  DataPtr d = make_data(m.get());
+  std::mt19937_64 rng(77);
+  std::uniform_real_distribution<double> u(-1, 1);
+  Dataset ds;
+  const int n = m->njnt;
+  for (const char* name : {"train", "test"}) {
+    Split s;
+    s.name = name;
+    for (const char* p : {"q:", "qd:", "qdd:"})
+      for (const auto& j : reg.joint_names()) s.x_columns.push_back(p + j);
+    for (const auto& j : reg.joint_names()) s.y_columns.push_back("tau:" + j);
+    s.X.resize(rows, 3 * n);
+    s.Y.resize(rows, n);
+    for (int r = 0; r < rows; ++r) {
+      for (int j = 0; j < n; ++j) {
+        const double lo = m->jnt_limited[j] ? m->jnt_range[2 * j] : -M_PI, hi = m->jnt_limited[j] ? m->jnt_range[2 * j + 1] : M_PI;
+        s.X(r, j) = d->qpos[j] = lo + (hi - lo) * 0.5 * (u(rng) + 1);
+        s.X(r, n + j) = d->qvel[j] = 2 * u(rng);
+        s.X(r, 2 * n + j) = d->qacc[j] = 6 * u(rng);
+      }
+      mj_inverse(m.get(), d.get());
+      for (int j = 0; j < n; ++j) s.Y(r, j) = d->qfrc_inverse[j];
+    }
+    ds.splits.push_back(s);
+  }
+  return ds;
+}
+
+}  // namespace
+
+// Exact data of the Gen3 (exact angles): identification recovers the model's base parameters
+// to 1e-6 of the largest and its torques to 1e-8. The shipped file's rounded angles tilt axes
+// by up to 7.3e-6 rad; what that adds to the torques lies below the rank tolerance (largest
+// dropped singular value 1.4e-6 of the largest) and is not carried by the base parameters, so
+// its exact torques are reproduced to that 1e-6, not to rounding (measured 2.3e-8).
+TEST(BaseParameters, IdentifyRecoversTheGen3) {
+  if (!std::filesystem::exists(gen3_file())) GTEST_SKIP() << "Gen3 model not found at " << gen3_file() << " (set SPML_SHARED_MODELS)";
+  const std::string exact = write_model("gen3_exact.urdf", map_angles(read_text(gen3_file()), exact_right_angle));
+  for (const auto& [file, torque_tol, param_tol] : {std::tuple<std::string, double, double>{exact, 1e-8, 1e-6}, {gen3_file(), 1e-6, 1e-6}}) {
+    MjcfRegressor reg(file);
+    const auto base = reg.base_parameters();
+    const auto id = identify(reg, base, simulated(reg, file, 400), "train");
+    const double scale = base.model_values.cwiseAbs().maxCoeff();
+    for (int i = 0; i < base.rank; ++i)
+      EXPECT_LE(std::fabs(id.estimate[i] - base.model_values[i]), param_tol * scale) << file << ": " << base.names[i];
+    ASSERT_EQ(id.errors.size(), 2u);
+    for (const auto& e : id.errors) EXPECT_LT(e.relative_error, torque_tol) << file << ": " << e.split;
+    std::cout << file << ": parameters within " << (id.estimate - base.model_values).cwiseAbs().maxCoeff() / scale
+              << " of the largest, torques within " << id.errors[0].relative_error << " / " << id.errors[1].relative_error
+              << " (fit / held out)\n";
+  }
+}
+
+// Models the regressor cannot take are refused with the joint's index, type and body,
+// through the command line: an unnamed hinge, a free joint.
+TEST(BaseParameters, UnnamedAndFreeJointsAreRefusedByName) {
+  const std::string unnamed = write_model("unnamed.xml",
+      "<mujoco><worldbody><body name=\"a\"><joint name=\"j0\" axis=\"0 1 0\"/><geom size=\"0.1\"/>"
+      "<body name=\"b\" pos=\"0.3 0 0\"><joint axis=\"0 1 0\"/><geom size=\"0.1\"/></body></body></worldbody></mujoco>");
+  const std::string free = write_model("free.xml",
+      "<mujoco><worldbody><body><freejoint/><geom size=\"0.1\"/></body></worldbody></mujoco>");
+  for (const char* cmd : {"regressor", "identify --data nowhere.h5"}) {
+    auto r = test::run(test::spml_bin() + " " + cmd + " --model " + unnamed);
+    EXPECT_EQ(r.exit_code, 1) << r.output;
+    EXPECT_NE(r.output.find("spml: error: " + unnamed + ": joint 1 (hinge, unnamed, in body 'b') has no name"), std::string::npos) << r.output;
+    r = test::run(test::spml_bin() + " " + cmd + " --model " + free);
+    EXPECT_EQ(r.exit_code, 1) << r.output;
+    EXPECT_NE(r.output.find("spml: error: " + free + ": joint 0 (free, unnamed, in body #1): the regressor supports hinge and slide joints only"),
+              std::string::npos) << r.output;
+  }
+}
+
+// regressor and identify say how the rank was decided, and warn when a singular value lies
+// near the tolerance: here a chain flipped by 3.14 instead of pi (axis tilted by 1.6e-3).
+TEST(BaseParameters, RankDecisionIsReportedAndCloseCallsWarned) {
+  auto r = test::run(test::spml_bin() + " regressor --json --model " + mjcf_path("planar_arm3.xml") + " 2>/dev/null");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const auto j = nlohmann::json::parse(r.output);
+  const auto& d = j["rank_decision"];
+  EXPECT_EQ(j["rank"], 17);
+  EXPECT_EQ(d["tolerance"], MjcfRegressor::kRankTolerance);
+  EXPECT_EQ(d["singular_values"].size(), 39u);
+  EXPECT_EQ(d["smallest_kept"], d["singular_values"][16]);
+  EXPECT_EQ(d["largest_dropped"], d["singular_values"][17]);
+  EXPECT_LT(d["largest_dropped"].get<double>(), 1e-12);   // the arm's dependencies are exact
+  EXPECT_FALSE(d["close_call"].get<bool>());
+  r = test::run(test::spml_bin() + " regressor --model " + mjcf_path("planar_arm3.xml"));
+  EXPECT_NE(r.output.find("rank 17 of 39: smallest kept singular value "), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("warning"), std::string::npos) << r.output;
+  r = test::run(test::spml_bin() + " regressor --model " + write_model("tilted.xml", planar_chain(3, "3.14")));
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("spml: warning: the base-parameter rank is a close call"), std::string::npos) << r.output;
+}
+
+// A subnormal number is finite: "1e-310" is read, as is an underflow to zero (rounding, as for
+// any decimal); overflow, inf and nan stay refused.
+TEST(ParseNumber, AcceptsSubnormalsAndUnderflow) {
+  ASSERT_TRUE(parse_number("1e-310"));
+  EXPECT_EQ(*parse_number("1e-310"), 1e-310);
+  EXPECT_EQ(std::fpclassify(*parse_number("-2.5e-315")), FP_SUBNORMAL);
+  EXPECT_EQ(*parse_number("4.9406564584124654e-324"), std::numeric_limits<double>::denorm_min());
+  EXPECT_EQ(*parse_number("1e-400"), 0.0);
+  EXPECT_EQ(*parse_numbers("1e-310,2"), (std::vector<double>{1e-310, 2}));
+  for (const char* bad : {"1e400", "-1e400", "inf", "nan", "1e-310x", ""}) EXPECT_FALSE(parse_number(bad)) << bad;
 }

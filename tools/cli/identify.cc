@@ -13,6 +13,18 @@ namespace {
 
 std::vector<double> vec(const Eigen::VectorXd& v) { return {v.data(), v.data() + v.size()}; }
 
+// The rank decision both commands report (README, "Base parameters"): JSON object, and a
+// warning on stderr when it is a close call.
+nlohmann::json rank_decision_json(const MjcfRegressor::Base& base) {
+  return {{"method", "svd"}, {"tolerance", base.tolerance}, {"smallest_kept", base.smallest_kept},
+          {"largest_dropped", base.largest_dropped},
+          {"ratio", base.largest_dropped > 0 ? nlohmann::json(base.gap()) : nlohmann::json(nullptr)},
+          {"close_call", base.close_call()}, {"singular_values", vec(base.singular_values)}};
+}
+void warn_close_call(const MjcfRegressor::Base& base) {
+  if (const std::string w = rank_decision_warning(base); !w.empty()) std::cerr << "spml: warning: " << w << "\n";
+}
+
 // The options both commands take: the model, its optional offset columns, JSON output.
 struct ModelArgs {
   std::string model;
@@ -35,8 +47,9 @@ void add_regressor(CLI::App& app) {
   cmd->callback([a] {
     MjcfRegressor reg(a->model, RegressorOptions{a->offsets});
     auto base = reg.base_parameters();
+    warn_close_call(base);
     nlohmann::json j{{"model", a->model}, {"standard_parameters", reg.param_names().size()}, {"rank", base.rank},
-                     {"qr_tolerance", base.tolerance}, {"names", base.names}, {"prior", vec(base.model_values)}};
+                     {"rank_decision", rank_decision_json(base)}, {"names", base.names}, {"prior", vec(base.model_values)}};
     if (a->bench) {
       Eigen::VectorXd q = Eigen::VectorXd::Constant(reg.nv(), 0.3), qd = q, qdd = q;
       const int rows = 20000;
@@ -49,8 +62,8 @@ void add_regressor(CLI::App& app) {
       j["benchmark_checksum"] = sink;
     }
     if (a->json) { std::cout << j.dump(2) << "\n"; return; }
-    std::cout << a->model << ": " << reg.param_names().size() << " standard parameters, rank " << base.rank
-              << " (column-pivoted QR, relative tolerance " << base.tolerance << ")\n";
+    std::cout << a->model << ": " << reg.param_names().size() << " standard parameters, " << base.rank
+              << " base parameters\n  " << rank_decision_text(base, reg.param_names().size()) << "\n";
     for (int i = 0; i < base.rank; ++i)
       std::cout << "  " << std::setw(3) << i << "  " << std::setw(12) << base.model_values[i] << "  " << base.names[i] << "\n";
     if (a->bench) std::cout << "regressor rows per second: " << j["benchmark_rows_per_second"].get<double>() << "\n";
@@ -81,16 +94,19 @@ void add_identify(CLI::App& app) {
       return identify_consistent_command({a->model, a->data, a->split, a->write_model, a->json, a->offsets, a->prior_weight});
     MjcfRegressor reg(a->model, RegressorOptions{a->offsets});
     auto base = reg.base_parameters();
+    warn_close_call(base);
     Dataset ds = read_dataset(a->data);
     Identification id = identify(reg, base, ds, a->split);
-    nlohmann::json j{{"model", a->model}, {"data", a->data}, {"split", a->split}, {"names", id.names},
+    nlohmann::json j{{"model", a->model}, {"data", a->data}, {"split", a->split}, {"rank_decision", rank_decision_json(base)},
+                     {"names", id.names},
                      {"estimate", vec(id.estimate)}, {"std_error", vec(id.std_error)}, {"prior", vec(id.prior)},
                      {"sigma", id.sigma}, {"condition_number", id.condition}};
     for (const auto& e : id.errors)
       j["errors"].push_back({{"split", e.split}, {"rows", e.rows}, {"relative_error", e.relative_error}, {"rmse", e.rmse}});
     if (a->json) { std::cout << j.dump(2) << "\n"; return; }
     std::cout << "identified on '" << a->split << "' of " << a->data << " (condition number " << id.condition
-              << ", residual std " << id.sigma << ")\n";
+              << ", residual std " << id.sigma << ")\n  base parameters: " << rank_decision_text(base, reg.param_names().size())
+              << "\n";
     std::cout << "  " << std::setw(12) << "estimate" << std::setw(12) << "std err" << std::setw(12) << "prior" << "  parameter\n";
     for (size_t i = 0; i < id.names.size(); ++i)
       std::cout << "  " << std::setw(12) << id.estimate[i] << std::setw(12) << id.std_error[i] << std::setw(12) << id.prior[i]

@@ -16,13 +16,15 @@
 
 namespace spml {
 
-// A finite double spelled out completely by `text`.
+// A finite double spelled out completely by `text`. strtod reports ERANGE both for overflow
+// (it returns +-HUGE_VAL, refused as not finite) and for underflow, where it returns the
+// nearest double: a subnormal such as 1e-310, or 0 below about 4.9e-324. That is rounding, as
+// for any other decimal, so it is accepted.
 inline std::optional<double> parse_number(const std::string& text) {
   if (text.empty() || std::isspace(static_cast<unsigned char>(text.front()))) return std::nullopt;
   char* end = nullptr;
-  errno = 0;
   const double v = std::strtod(text.c_str(), &end);
-  if (*end != '\0' || errno == ERANGE || !std::isfinite(v)) return std::nullopt;
+  if (*end != '\0' || !std::isfinite(v)) return std::nullopt;
   return v;
 }
 
