@@ -12,6 +12,10 @@ void Diagnosis::load() {
   ro.coulomb_only_where_modelled = true;
   reg_ = std::make_unique<MjcfRegressor>(opt_.model, ro);
   base_ = reg_->base_parameters();
+  // The base-parameter rank decision is said in every report (and warned about when close),
+  // since the `parameters` cause and the written inertials rest on it.
+  notes_.push_back("base parameters: " + rank_decision_text(base_, reg_->param_names().size()));
+  if (const std::string w = rank_decision_warning(base_); !w.empty()) notes_.push_back(w);
   ds_ = read_dataset(opt_.data);
   const std::string where = opt_.data + ": ";
   Split fit_part, test_part;

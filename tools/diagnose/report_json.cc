@@ -257,6 +257,9 @@ void Diagnosis::build_report(const std::string& out_dir) {
   R["rows"] = {{"fit", fit_.N}, {"test", test_.N}};
   R["settings"] = {{"bic_threshold", opt_.bic_threshold}, {"min_gain", opt_.min_gain}, {"max_causes", opt_.max_causes},
                    {"still_speed", opt_.still_speed}, {"candidates", cands_.size()}};
+  R["base_parameters"] = {{"standard", reg_->param_names().size()}, {"rank", base_.rank},
+                          {"tolerance", base_.tolerance}, {"smallest_kept", base_.smallest_kept},
+                          {"largest_dropped", base_.largest_dropped}, {"close_call", base_.close_call()}};
   R["baseline"] = metrics(fit_.y0, test_.y0);
   R["parallel_filter"] = {{"source", filter_plan_.source == FilterPlan::Source::recorded   ? "recorded"
                                      : filter_plan_.source == FilterPlan::Source::detected ? "detected"
