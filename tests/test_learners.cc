@@ -446,6 +446,39 @@ TEST(Bench, RejectsConfigBeforeAnyFit) {
   EXPECT_TRUE(fs::exists(o.out + "/results.csv"));
 }
 
+// The C++ API refuses what the command line refuses (BenchOptions::check), before it reads
+// the dataset or writes anything.
+TEST(Bench, OptionsAreCheckedByTheLibrary) {
+  auto error_of = [](const BenchOptions& o) -> std::string {
+    try {
+      o.check();
+      return "";
+    } catch (const LearnerError& e) {
+      return e.what();
+    }
+  };
+  BenchOptions o;
+  o.data = "no-such-file.h5";
+  o.out = (test::temp_dir("bench-options") / "out").string();
+  o.learners = {"LLS"};
+  EXPECT_EQ(error_of(o), "");
+  BenchOptions bad = o;
+  bad.reps = 0;
+  EXPECT_EQ(error_of(bad), "--reps 0: must be 1 ... 1000");
+  bad = o;
+  bad.shard = 3, bad.shards = 2;
+  EXPECT_EQ(error_of(bad), "--shard 3/2: expected K/N with 1 <= K <= N");
+  bad = o;
+  bad.test_max = -5;
+  EXPECT_NE(error_of(bad).find("--test-max -5"), std::string::npos);
+  bad = o;
+  bad.out.clear();
+  EXPECT_EQ(error_of(bad), "--out: no output folder given");
+  bad = o;
+  bad.reps = 0;
+  EXPECT_THROW(run_bench(registry(), bad), LearnerError);   // run_bench checks before it opens the (missing) file
+}
+
 TEST(Cli, BenchAndCompare) {
   const fs::path dir = test::temp_dir("cli-bench");
   auto r = test::run(test::spml_bin() + " bench --data " + scenario_file("toy") + " --out " + (dir / "b").string() +
