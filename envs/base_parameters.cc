@@ -63,9 +63,10 @@ Eigen::MatrixXd MjcfRegressor::sample_regressor(int samples, std::uint64_t seed)
 // Column scales that make every column a torque of one common size per unit change of its
 // parameter, so that the singular values compare like with like whatever the model's units:
 // inertial columns of body b are multiplied by the size of a typical parameter of their kind,
-// L^2 for masses, L for first moments, 1 for inertias (L = the reach of the model: the
+// M for masses, M*L for first moments, M*L^2 for inertias (L = the reach of the model: the
 // largest distance of a body origin or centre of mass from its tree's root at qpos0; the
-// common factor mass x L^2 cancels). Their relative sizes stay physical, so a column that is
+// common factor M cancels). A change of length unit by s then scales every inertial column
+// by s^2 alike (a mass column is a torque per mass, ~ L^2), so the rank does not depend on it. Their relative sizes stay physical, so a column that is
 // rounding noise stays noise. The other columns (armature, damping, Coulomb, offsets, springs,
 // plugins) are exact functions of the state with units of their own: each is scaled to the
 // norm of the largest inertial column.
@@ -82,7 +83,7 @@ Eigen::VectorXd MjcfRegressor::column_scales(const Eigen::MatrixXd& W) const {
   if (!(L > 0)) L = 1;   // every body at its root: the mass and moment columns are zero anyway
   const Eigen::Index inertial = 10 * (m->nbody - 1);
   Eigen::VectorXd scale(W.cols());
-  for (Eigen::Index c = 0; c < inertial; ++c) scale[c] = c % 10 == 0 ? L * L : (c % 10 < 4 ? L : 1.0);
+  for (Eigen::Index c = 0; c < inertial; ++c) scale[c] = c % 10 == 0 ? 1.0 : (c % 10 < 4 ? L : L * L);
   const double reference = inertial > 0 ? (W.leftCols(inertial) * scale.head(inertial).asDiagonal()).colwise().norm().maxCoeff() : 1.0;
   for (Eigen::Index c = inertial; c < W.cols(); ++c) {
     const double n = W.col(c).norm();

@@ -280,6 +280,26 @@ TEST(BaseParameters, Gen3AsShippedAndWithExactAnglesAgree) {
 }
 
 // Rounding every angle to 4 decimals, as URDF exporters do, leaves the rank as it is.
+// The same arm in millimetres (lengths x 1e3, inertias, armature and damping x 1e6, gravity
+// x 1e3): physically the same robot, so the same base parameters (values x 1e6).
+TEST(BaseParameters, LengthUnitDoesNotChangeTheRank) {
+  const char* kArmMm = R"(<mujoco model="arm_mm">
+  <compiler angle="radian" inertiafromgeom="false"/>
+  <option gravity="0 0 -9810"/>
+  <default><joint type="hinge" axis="0 -1 0" armature="1e6" damping="1e7"/></default>
+  <worldbody>
+    <body name="link0"><joint name="joint0"/><inertial pos="566 0 0" mass="5" diaginertia="1e4 828220 828220"/>
+      <body name="link1" pos="1000 0 0"><joint name="joint1"/><inertial pos="566 0 0" mass="5" diaginertia="1e4 828220 828220"/>
+        <body name="link2" pos="1000 0 0"><joint name="joint2"/><inertial pos="100 0 0" mass="1" diaginertia="1e4 9e4 9e4"/>
+  </body></body></body></worldbody></mujoco>)";
+  MjcfRegressor si(mjcf_path("planar_arm3.xml")), mm(write_model("arm_mm.xml", kArmMm));
+  const auto a = si.base_parameters(), b = mm.base_parameters();
+  ASSERT_EQ(a.rank, b.rank);
+  EXPECT_FALSE(b.close_call());
+  // Same singular values up to rounding: the decision is unit-free.
+  for (int i = 0; i < a.rank; ++i) EXPECT_NEAR(a.singular_values[i], b.singular_values[i], 1e-6 * a.singular_values[0]) << i;
+}
+
 TEST(BaseParameters, RoundingAnglesToFourDecimalsKeepsTheRank) {
   std::vector<std::string> files = {mjcf_path("planar_arm3.xml"), mjcf_path("planar_arm3_ll.xml"),
                                     mjcf_path("planar_arm3_gl.xml"), mjcf_path("via_joint.xml")};

@@ -248,9 +248,11 @@ class ModelsIdentifyDiagnose(unittest.TestCase):
         r = spml.regressor(ARM)
         cli = json.loads(run("regressor", "--model", ARM, "--json"))
         self.assertEqual(r["rank"], 17)   # the paper's 17 regrouped coefficients
-        for key in ("standard_parameters", "rank", "qr_tolerance", "names"):
+        for key in ("standard_parameters", "rank", "names"):
             self.assertEqual(r[key], cli[key])
         self.assertEqual(r["prior"].tolist(), cli["prior"])
+        for key in ("method", "tolerance", "smallest_kept", "largest_dropped", "ratio", "close_call"):
+            self.assertEqual(r["rank_decision"][key], cli["rank_decision"][key])
         self.assertEqual(len(r["standard_names"]), len(r["standard_values"]))
         ident = spml.identify(ARM, self.gl)
         cli = json.loads(run("identify", "--model", ARM, "--data", self.gl, "--json"))

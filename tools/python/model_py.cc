@@ -62,7 +62,15 @@ pb::dict regressor_dict(const std::string& model, bool offsets, const std::vecto
   d["standard_values"] = to_numpy(reg->model_params());
   d["standard_parameters"] = reg->param_names().size();
   d["rank"] = base.rank;
-  d["qr_tolerance"] = base.tolerance;
+  pb::dict decision;   // the same fields as the commands' --json "rank_decision"
+  decision["method"] = "svd";
+  decision["tolerance"] = base.tolerance;
+  decision["smallest_kept"] = base.smallest_kept;
+  decision["largest_dropped"] = base.largest_dropped;
+  decision["ratio"] = base.largest_dropped > 0 ? pb::object(pb::float_(base.gap())) : pb::object(pb::none());
+  decision["close_call"] = base.close_call();
+  decision["singular_values"] = to_numpy(base.singular_values);
+  d["rank_decision"] = decision;
   d["names"] = base.names;
   d["prior"] = to_numpy(base.model_values);
   d["independent"] = base.independent;
