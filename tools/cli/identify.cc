@@ -107,9 +107,9 @@ void add_identify(CLI::App& app) {
     std::cout << "identified on '" << a->split << "' of " << a->data << " (condition number " << id.condition
               << ", residual std " << id.sigma << ")\n  base parameters: " << rank_decision_text(base, reg.param_names().size())
               << "\n";
-    std::cout << "  " << std::setw(12) << "estimate" << std::setw(12) << "std err" << std::setw(12) << "prior" << "  parameter\n";
+    std::cout << "  " << std::setw(12) << "estimate" << " " << std::setw(12) << "std err" << " " << std::setw(12) << "prior" << "  parameter\n";
     for (size_t i = 0; i < id.names.size(); ++i)
-      std::cout << "  " << std::setw(12) << id.estimate[i] << std::setw(12) << id.std_error[i] << std::setw(12) << id.prior[i]
+      std::cout << "  " << std::setw(12) << id.estimate[i] << " " << std::setw(12) << id.std_error[i] << " " << std::setw(12) << id.prior[i]
                 << "  " << id.names[i] << "\n";
     for (const auto& e : id.errors)
       std::cout << "  " << (e.split == a->split ? "fit      " : "held out ") << e.split << ": relative error "
