@@ -2,9 +2,10 @@
 # The force-plugin kit end to end: installs spml's development package into a temporary prefix,
 # builds the out-of-tree example effect (plugins/examples/cubic_damping) against it with its own
 # CMake project, lists it with `spml plugins`, and scores an MJCF that declares it on data whose
-# torque is exactly that effect: tau = c*qd^3 for one hinge with no gravity and qdd = 0 (inverse
-# dynamics: tau = M*qdd + bias - passive, passive = -c*qd^3). With the plugin declared the
-# model's relative error is at rounding level; without it, it is the whole signal.
+# torque is exactly that effect plus the link's inertia: tau = 0.02*qdd + c*qd^3 for one hinge
+# with no gravity (inverse dynamics: tau = M*qdd + bias - passive, passive = -c*qd^3). With the
+# plugin declared the model's error is at rounding level; without it, it misses c*qd^3. regressor
+# and identify find the plugin through --plugin-path and identify recovers c.
 set -euo pipefail
 build_dir=$1 source_dir=$2 spml=$3
 work=$(mktemp -d)
@@ -40,20 +41,38 @@ f.attrs["format"] = "spml/1"
 for split, n in (("train", 200), ("test", 100)):
     q, qd = rng.uniform(-3, 3, n), rng.uniform(-2, 2, n)
     g = f.create_group(split)
-    X = np.stack([q, qd, np.zeros(n)], axis=1)
+    qdd = rng.uniform(-5, 5, n)
+    X = np.stack([q, qd, qdd], axis=1)
     g.create_dataset("X", data=X).attrs["columns"] = "q:j,qd:j,qdd:j"
-    g.create_dataset("Y", data=(0.7 * qd**3)[:, None]).attrs["columns"] = "tau:j"
+    # inertia about the hinge: 0.01 + 1 kg * (0.1 m)^2 = 0.02
+    g.create_dataset("Y", data=(0.02 * qdd + 0.7 * qd**3)[:, None]).attrs["columns"] = "tau:j"
 PY
 
 "$spml" bench --data "$work/data.h5" --out "$work/with" --model "$work/with.xml" --plugin-path "$lib" \
   --learners LLS-prior --reps 1 >/dev/null 2>&1
 "$spml" bench --data "$work/data.h5" --out "$work/without" --model "$work/without.xml" --plugin-path "$lib" \
   --learners LLS-prior --reps 1 >/dev/null 2>&1
+# regressor and identify find the plugin too: its column seal.c joins the base parameters and
+# identify recovers c = 0.7 from the data of the model without the declaration's value.
+"$spml" regressor --model "$work/with.xml" --plugin-path "$lib" --json > "$work/regressor.json"
+/usr/bin/python3 - "$work/regressor.json" <<'PY'
+import json, sys
+names = json.load(open(sys.argv[1]))["names"]
+assert any("seal" in n or "j.c" in n for n in names), f"no cubic-damping base parameter in {names}"
+PY
+"$spml" identify --model "$work/with.xml" --data "$work/data.h5" --plugin-path "$lib" --json > "$work/identify.json"
+/usr/bin/python3 - "$work/identify.json" <<'PY'
+import json, sys
+j = json.load(open(sys.argv[1]))
+c = [e for n, e in zip(j["names"], j["estimate"]) if n.endswith(".c")]
+assert len(c) == 1 and abs(c[0] - 0.7) < 1e-9, f"identify: c = {c} (names {j['names']})"
+print(f"identify --plugin-path: c = {c[0]:.12g} (true 0.7)")
+PY
 rmse() { awk -F, 'NR > 1 && $2 == "test" && $4 == "LLS-prior" {print $5}' "$1/results.csv"; }
 with=$(rmse "$work/with") without=$(rmse "$work/without")
 echo "LLS-prior test RMSE: with the plugin declared $with, without $without"
 awk -v w="$with" -v wo="$without" 'BEGIN {
   if (w == "" || wo == "") { print "missing rows in results.csv"; exit 1 }
-  if (w > 1e-9) { print "the declared plugin does not reproduce tau = c*qd^3"; exit 1 }
-  if (wo < 1) { print "without the plugin the model should miss the whole signal"; exit 1 }
+  if (w > 1e-9) { print "the declared plugin does not reproduce tau = 0.02*qdd + c*qd^3"; exit 1 }
+  if (wo < 1) { print "without the plugin the model should miss c*qd^3"; exit 1 }
 }'

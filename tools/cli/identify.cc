@@ -25,15 +25,18 @@ void warn_close_call(const MjcfRegressor::Base& base) {
   if (const std::string w = rank_decision_warning(base); !w.empty()) std::cerr << "spml: warning: " << w << "\n";
 }
 
-// The options both commands take: the model, its optional offset columns, JSON output.
+// The options both commands take: the model, its optional offset columns, JSON output, and
+// where the force plugins the model declares are found beyond the shipped ones.
 struct ModelArgs {
   std::string model;
   bool json = false, offsets = false;
+  std::vector<std::string> plugin_paths;
 };
 void add_model_options(CLI::App* cmd, ModelArgs& a, const std::string& model_help) {
   cmd->add_option("--model,-m", a.model, model_help)->required();
   cmd->add_flag("--json", a.json, "print JSON");
   cmd->add_flag("--offsets", a.offsets, "add a constant-torque parameter per joint");
+  cmd->add_option("--plugin-path", a.plugin_paths, "extra force-plugin library or folder (also $SPML_PLUGIN_PATH)");
 }
 
 }  // namespace
@@ -45,6 +48,7 @@ void add_regressor(CLI::App& app) {
   add_model_options(cmd, *a, "MJCF file (hinge/slide joints)");
   cmd->add_flag("--benchmark", a->bench, "also time regressor evaluation (rows per second)");
   cmd->callback([a] {
+    add_plugin_paths(a->plugin_paths);
     MjcfRegressor reg(a->model, RegressorOptions{a->offsets});
     auto base = reg.base_parameters();
     warn_close_call(base);
@@ -85,6 +89,7 @@ void add_identify(CLI::App& app) {
       ->check(CLI::PositiveNumber);
   cmd->add_option("--write-model", a->write_model, "consistent: write the MJCF with the identified inertials and joint terms here");
   cmd->callback([a, cmd] {
+    add_plugin_paths(a->plugin_paths);
     if (a->estimator == "ls" && !a->write_model.empty())
       throw CLI::ValidationError("--write-model", "needs --estimator consistent: base parameters do not define every body");
     const bool consistent = a->estimator == "consistent" || (a->estimator.empty() && !a->write_model.empty());
