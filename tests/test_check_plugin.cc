@@ -90,6 +90,20 @@ TEST(CheckPlugin, RefusesLibrariesThatAreNoPluginOrSpeakAnotherAbi) {
   EXPECT_TRUE(has(none.output, "FAIL  (library)  abi-version"));
 }
 
+// A plugin that crashes fails the clause it crashed in; the checker goes on with the next
+// library (each is checked in a child process) and --json stays one document.
+TEST(CheckPlugin, ACrashFailsItsClauseAndTheNextLibraryIsChecked) {
+  const auto r = run(spml::test::spml_bin() + " check-plugin " + broken("learner_crash") + " " + broken("force_none"));
+  SCOPED_TRACE(r.output);
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(has(r.output, "FAIL  SmallRidge  deterministic: the plugin crashed"));
+  EXPECT_TRUE(has(r.output, "2 libraries, "));
+  EXPECT_TRUE(has(r.output, "spml: error: check-plugin: 1 of "));
+  const auto j = run(spml::test::spml_bin() + " check-plugin --json " + broken("learner_crash"));
+  const auto doc = nlohmann::json::parse(j.output.substr(0, j.output.rfind('}') + 1));
+  EXPECT_EQ(doc["failed"], 1);
+}
+
 TEST(CheckPlugin, JsonCountsTheFailures) {
   const auto r = run(spml::test::spml_bin() + " check-plugin --json " + broken("learner_variance") + " " + broken("force_none") +
                      "");

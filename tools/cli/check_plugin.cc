@@ -1,6 +1,7 @@
 // spml check-plugin LIB... [--json]: the contract suite (spml/check_plugin.h) on each library.
-// One line per clause as it finishes; exit 1 when any clause fails.
+// One line per clause; exit 1 when any clause fails (a crashing plugin fails its clause).
 #include <signal.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -8,6 +9,7 @@
 #include <filesystem>
 #include <iostream>
 #include <memory>
+#include <sstream>
 #include <stdexcept>
 
 #include "commands.h"
@@ -17,20 +19,83 @@
 namespace spml::cli {
 namespace {
 
-// A plugin that crashes takes the checker with it; name the clause it crashed in first.
+// Each library is checked in a child process, so that a plugin that crashes fails the clause it
+// crashed in and the checker goes on with the next library, its summary and --json intact. The
+// child sends every finished clause to the parent as one JSON line; its crash handler sends the
+// clause that was running.
+int g_clause_fd = -1;
+
+void write_all(int fd, const std::string& text) {
+  for (size_t done = 0; done < text.size();) {
+    const ssize_t n = write(fd, text.data() + done, text.size() - done);
+    if (n <= 0) return;
+    done += static_cast<size_t>(n);
+  }
+}
+
 void on_crash(int sig) {
   const char* clause = check::running_clause();
-  const char head[] = "FAIL  ";
-  const char tail[] = ": the plugin crashed (fatal signal)\n";
-  (void)!write(STDOUT_FILENO, head, sizeof head - 1);
-  (void)!write(STDOUT_FILENO, clause, std::strlen(clause));
-  (void)!write(STDOUT_FILENO, tail, sizeof tail - 1);
+  const char head[] = "{\"crashed\":\"";
+  (void)!write(g_clause_fd, head, sizeof head - 1);
+  for (const char* c = clause; *c; ++c)   // clause names are plain words; keep the line valid JSON
+    if (*c != '"' && *c != '\\') (void)!write(g_clause_fd, c, 1);
+  (void)!write(g_clause_fd, "\"}\n", 3);
   signal(sig, SIG_DFL);
   raise(sig);
 }
 
-void name_crashes() {
-  for (int sig : {SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT}) signal(sig, on_crash);
+check::Verdict verdict_of(const std::string& word) {
+  return word == "PASS" ? check::Verdict::kPass : word == "FAIL" ? check::Verdict::kFail : check::Verdict::kSkip;
+}
+
+// Runs check_library(file) in a child; the parent rebuilds the report from the clause lines.
+check::LibraryReport check_isolated(const std::string& file, check::CheckOptions options) {
+  int fds[2];
+  if (pipe(fds) != 0) throw std::runtime_error("check-plugin: cannot create a pipe");
+  std::cout.flush();
+  const pid_t pid = fork();
+  if (pid < 0) throw std::runtime_error("check-plugin: cannot fork");
+  if (pid == 0) {
+    close(fds[0]);
+    g_clause_fd = fds[1];
+    for (int sig : {SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT}) signal(sig, on_crash);
+    options.on_clause = [](const check::Clause& c) {
+      check::LibraryReport one;
+      one.clauses.push_back(c);
+      write_all(g_clause_fd, check::to_json(one)["clauses"][0].dump() + "\n");
+    };
+    const check::LibraryReport r = check::check_library(file, options);
+    write_all(g_clause_fd, nlohmann::json{{"kind", r.kind}, {"seconds", r.seconds}}.dump() + "\n");
+    _exit(0);
+  }
+  close(fds[1]);
+  std::string text;
+  char buf[4096];
+  for (ssize_t n; (n = read(fds[0], buf, sizeof buf)) > 0;) text.append(buf, static_cast<size_t>(n));
+  close(fds[0]);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  check::LibraryReport r;
+  r.file = file;
+  std::istringstream lines(text);
+  for (std::string line; std::getline(lines, line);) {
+    const auto j = nlohmann::json::parse(line, nullptr, false);
+    if (j.is_discarded()) continue;
+    if (j.contains("clause"))
+      r.clauses.push_back({j["plugin"], j["clause"], verdict_of(j["verdict"]), j["detail"]});
+    else if (j.contains("crashed")) {   // "<plugin> <clause>"
+      const std::string running = j["crashed"];
+      const auto space = running.find(' ');
+      r.clauses.push_back({space == std::string::npos ? "" : running.substr(0, space), running.substr(space == std::string::npos ? 0 : space + 1),
+                           check::Verdict::kFail,
+                           "the plugin crashed (signal " + std::to_string(WIFSIGNALED(status) ? WTERMSIG(status) : 0) + ")"});
+    }
+    else if (j.contains("kind"))
+      r.kind = j["kind"], r.seconds = j["seconds"];
+  }
+  if (!(WIFEXITED(status) && WEXITSTATUS(status) == 0) && (r.clauses.empty() || r.clauses.back().detail.rfind("the plugin crashed", 0) != 0))
+    r.clauses.push_back({"", "process", check::Verdict::kFail, "the check ended abnormally (status " + std::to_string(status) + ")"});
+  return r;
 }
 
 }  // namespace
@@ -55,21 +120,20 @@ void add_check_plugin(CLI::App& app) {
       if (eq == std::string::npos || eq == 0) throw CLI::ValidationError("--set", "'" + kv + "': expected key=value");
       options.config.emplace_back(kv.substr(0, eq), kv.substr(eq + 1));
     }
-    if (!*json) options.on_clause = [](const check::Clause& c) { std::cout << "  " << check::clause_line(c) << std::endl; };
-    name_crashes();
     const auto t0 = std::chrono::steady_clock::now();
     nlohmann::json libraries = nlohmann::json::array();
     int failed = 0, clauses = 0;
     for (const auto& f : *files) {
       const std::string file = std::filesystem::absolute(f).string();
       if (!*json) std::cout << file << std::endl;
-      const check::LibraryReport r = check::check_library(file, options);
+      const check::LibraryReport r = check_isolated(file, options);
       for (const auto& c : r.clauses) {
+        if (!*json) std::cout << "  " << check::clause_line(c) << "\n";
         ++clauses;
         if (c.verdict == check::Verdict::kFail) ++failed;
       }
       if (*json) libraries.push_back(check::to_json(r));
-      else std::cout << "  " << (r.passed() ? "passed" : "FAILED") << " (" << r.kind << ", " << number_text(r.seconds, 3) << " s)\n";
+      else std::cout << "  " << (r.passed() ? "passed" : "FAILED") << " (" << (r.kind.empty() ? "kind unknown" : r.kind) << ", " << number_text(r.seconds, 3) << " s)\n";
     }
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     if (*json)
