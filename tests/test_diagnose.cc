@@ -19,10 +19,13 @@
 #include "spml/diagnose.h"
 #include "spml/envs/mjcf_regressor.h"
 #include "spml/envs/mujoco_model.h"
+#include "diagnose_draws.h"
 #include "test_util.h"
 
 namespace spml {
 namespace {
+
+using test::torque_scale;
 
 using test::num;
 using test::random_chain;
@@ -102,21 +105,6 @@ Measured measure(const Draw& d, std::mt19937_64& rng, const std::string& true_pa
   ds.splits = {all.slice(0, 2800, "train"), all.slice(2800, N, "test")};
   write_dataset(data_path, ds);
   return {std::sqrt(noise_test / tau_test)};
-}
-
-// RMS per joint of the user's model's torques along a typical trajectory: the noise scale.
-std::vector<double> torque_scale(const std::string& path, int J) {
-  MjcfRegressor reg(path);
-  auto ws = reg.workspace();
-  std::vector<double> s(static_cast<size_t>(J), 0.0);
-  for (int i = 0; i < 200; ++i) {
-    Eigen::VectorXd q(J), qd(J), qdd(J);
-    for (int j = 0; j < J; ++j) q[j] = std::sin(0.1 * i + j), qd[j] = std::cos(0.13 * i + j), qdd[j] = 2 * std::sin(0.17 * i);
-    const Eigen::VectorXd tau = reg.evaluate(ws, q, qd, qdd) * reg.model_params();
-    for (int j = 0; j < J; ++j) s[static_cast<size_t>(j)] += tau[reg.model()->jnt_dofadr[j]] * tau[reg.model()->jnt_dofadr[j]] / 200;
-  }
-  for (auto& v : s) v = 0.01 * std::sqrt(v) + 0.002;
-  return s;
 }
 
 Draw make_draw(int index, std::mt19937_64& rng, const std::filesystem::path& dir, std::vector<double>& sigma) {
