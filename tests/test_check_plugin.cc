@@ -70,6 +70,35 @@ TEST(CheckPlugin, RefusesAWriteConfigThatDoesNotRecreateThePlugin) {
   expect_only_failure("force_write_config", "broken_viscous write-config");
 }
 
+TEST(CheckPlugin, RefusesALearnerThatWritesIntoItsInputs) {
+  expect_only_failure("learner_mutate", "SmallRidge inputs-untouched");
+  EXPECT_TRUE(has(check(broken("learner_mutate")).output, "fit wrote into its inputs: x[0] was "));
+}
+TEST(CheckPlugin, RefusesAForcePluginThatWritesAnotherJointsDof) {
+  expect_only_failure("force_other_dof", "broken_viscous own-dofs");
+  EXPECT_TRUE(has(check(broken("force_other_dof")).output, "attached to joint slide (dof 1) only, compute changed dof 0 (joint hinge)"));
+}
+
+// --set is checked before any clause runs: a key no plugin has (a typo) and a value the key
+// refuses are usage errors (exit 2) naming key and value, not a failure of the plugin.
+TEST(CheckPlugin, SetWithAnUnknownKeyOrABadValueIsAUsageError) {
+  const std::string spml = spml::test::spml_bin() + " check-plugin ";
+  const auto typo = run(spml + "--set lamda=0.1 " + broken("learner_none"));
+  EXPECT_EQ(typo.exit_code, 2) << typo.output;
+  EXPECT_TRUE(has(typo.output, "spml: error: --set: lamda=0.1: no plugin in this library has the key 'lamda' (SmallRidge: lambda)"))
+      << typo.output;
+  EXPECT_FALSE(has(typo.output, "FAIL")) << typo.output;
+  const auto range = run(spml + "--set lambda=5 " + broken("learner_none") + " " + broken("force_none"));
+  EXPECT_EQ(range.exit_code, 2) << range.output;
+  EXPECT_TRUE(has(range.output, "--set: lambda=5: SmallRidge's key 'lambda': '5' is outside [0, 1]")) << range.output;
+  const auto text = run(spml + "--set fv=abc " + broken("learner_none") + " " + broken("force_none"));
+  EXPECT_EQ(text.exit_code, 2) << text.output;
+  EXPECT_TRUE(has(text.output, "--set: fv=abc: broken_viscous's key 'fv': 'abc' is not a comma-separated list of finite numbers"))
+      << text.output;
+  const auto fine = run(spml + "--set lambda=0.5 " + broken("learner_none") + " " + broken("force_none"));
+  EXPECT_EQ(fine.exit_code, 0) << fine.output;   // a key only one of the libraries has is fine
+}
+
 // Hidden state shows in every clause that calls compute twice; the one it breaks is named.
 TEST(CheckPlugin, RefusesHiddenStateInAPluginDeclaringNone) {
   const auto r = check(broken("force_hidden_state"));
@@ -133,7 +162,7 @@ TEST(CheckPlugin, LibraryApiReportsEveryClause) {
   std::vector<std::string> names;
   for (const auto& c : r.clauses) names.push_back(c.name);
   for (const char* clause : {"abi-version", "names", "shape-params", "callbacks", "key-table", "create", "finite-force",
-                             "no-hidden-state", "regressor", "params-roundtrip", "write-config", "reset"})
+                             "no-hidden-state", "own-dofs", "regressor", "params-roundtrip", "write-config", "reset"})
     EXPECT_TRUE(contains(names, clause)) << clause;
 }
 

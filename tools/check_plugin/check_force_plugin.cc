@@ -138,7 +138,8 @@ std::string config_text(const std::vector<std::pair<std::string, std::string>>& 
 
 // The instance every clause uses, or the reason none could be made.
 std::unique_ptr<PluginInstance> create(const spml_force_plugin& p, const mjModel* m, std::uint64_t seed,
-                                       const std::vector<std::pair<std::string, std::string>>& given, std::string* detail) {
+                                       const std::vector<std::pair<std::string, std::string>>& given, std::string* detail,
+                                       const std::vector<int>& joints = {0, 1, 2}) {
   std::mt19937_64 rng(seed);
   std::string last;
   for (int attempt = 0; attempt < kAttempts; ++attempt) {
@@ -155,8 +156,10 @@ std::unique_ptr<PluginInstance> create(const spml_force_plugin& p, const mjModel
       config.emplace_back(k->name, v);
     }
     try {
-      auto inst = std::make_unique<PluginInstance>(p, m, std::vector<int>{0, 1, 2}, config, "check-plugin");
-      *detail = "on joints hinge, slide, hinge2 with " + config_text(config) + " (attempt " + std::to_string(attempt + 1) + ")";
+      auto inst = std::make_unique<PluginInstance>(p, m, joints, config, "check-plugin");
+      std::string names;
+      for (int j : joints) names += (names.empty() ? "" : ", ") + std::string(mj_id2name(m, mjOBJ_JOINT, j));
+      *detail = "on joints " + names + " with " + config_text(config) + " (attempt " + std::to_string(attempt + 1) + ")";
       return inst;
     } catch (const std::exception& e) {
       last = e.what();
@@ -312,6 +315,28 @@ Outcome write_config(Bench& b) {
   return pass("'" + text + "' recreates the parameters and the force within rel " + num(kRelTol));
 }
 
+// Attached to the middle joint (slide) only, compute adds into qfrc pre-filled with other
+// values: the other dofs (a hinge before it, a hinge after it) must keep theirs bit for bit.
+// A plugin that writes a neighbour's dof adds a force the host never asked for and that no
+// regressor column of that joint explains.
+Outcome own_dofs(Bench& b, const std::vector<std::pair<std::string, std::string>>& given, std::uint64_t seed) {
+  constexpr int kJoint = 1;
+  std::string detail;
+  const auto one = create(b.p, b.m, seed, given, &detail, {kJoint});
+  if (!one) return skip("cannot be created on one joint: " + detail);
+  const int own = b.m->jnt_dofadr[kJoint];
+  const std::vector<mjtNum> prefilled{1.0, -2.0, 3.0};
+  for (size_t s = 0; s < b.states.size(); ++s) {
+    const auto f = force(*one, b.m, b.d.get(), b.states[s], prefilled);
+    for (int v = 0; v < b.m->nv; ++v)
+      if (v != own && !(f[v] == prefilled[v]))
+        return fail("attached to joint slide (dof " + std::to_string(own) + ") only, compute changed dof " + std::to_string(v) +
+                    " (joint " + mj_id2name(b.m, mjOBJ_JOINT, b.m->dof_jntid[v]) + ") from " + num(prefilled[v]) + " to " +
+                    num(f[v]) + " at state " + std::to_string(s));
+  }
+  return pass("attached to slide only, the other dofs untouched at " + std::to_string(b.states.size()) + " states");
+}
+
 // A prescribed trajectory (smooth sines, no integration): the forces along it.
 std::vector<std::vector<mjtNum>> trajectory(Bench& b, int steps) {
   const double dt = b.m->opt.timestep;
@@ -354,14 +379,17 @@ void check_one(const spml_force_plugin& p, const mjModel* m, Recorder& r) {
   });
   std::unique_ptr<PluginInstance> inst;
   std::string detail;
+  std::vector<std::pair<std::string, std::string>> given;
   r.run(name, "create", [&] {
-    inst = create(p, m, r.seed(), r.config_for(p.config_keys), &detail);
+    given = r.config_for(p.config_keys);
+    inst = create(p, m, r.seed(), given, &detail);
     return inst ? pass(detail) : fail(detail);
   });
   if (!inst) return;
   Bench b{p, m, make_data(m), *inst, random_states(m, r.seed() + 1, kStates), name};
   r.run(name, "no-hidden-state", [&] { return no_hidden_state(b); });
   r.run(name, "finite-force", [&] { return finite_and_additive(b); });
+  r.run(name, "own-dofs", [&] { return own_dofs(b, given, r.seed()); });
   r.run(name, "regressor", [&] { return regressor(b); });
   r.run(name, "params-roundtrip", [&] { return params_roundtrip(b); });
   r.run(name, "write-config", [&] { return write_config(b); });

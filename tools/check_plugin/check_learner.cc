@@ -2,6 +2,7 @@
 // parametric model with 3 coefficients (prior and truth given when the flags ask for them),
 // plus a residual the model cannot express and a little noise.
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <random>
 #include <vector>
@@ -62,11 +63,31 @@ Data wider(const Data& like) {
   return d;
 }
 
-// One fit through the raw ABI, as the host makes it (defaults filled in from the key table).
+const double kPrior[kParams] = {0.9 * kTheta[0] + 0.05, 0.9 * kTheta[1] + 0.05, 0.9 * kTheta[2] + 0.05};
+
+// "" when `after` holds the same bytes as `before`, else which array changed and where first.
+std::string changed(const std::vector<double>& before, const double* after, const char* what) {
+  for (size_t i = 0; i < before.size(); ++i)
+    if (std::memcmp(&before[i], &after[i], sizeof(double)) != 0)
+      return std::string(what) + "[" + std::to_string(i) + "] was " + num(before[i]) + ", is " + num(after[i]);
+  return "";
+}
+
+// "" when the copy `used` still equals `given` byte for byte (x, y, phi), else what changed.
+std::string data_changed(const Data& given, const Data& used) {
+  std::string why = changed(given.x, used.x.data(), "x");
+  if (why.empty()) why = changed(given.y, used.y.data(), "y");
+  if (why.empty()) why = changed(given.phi, used.phi.data(), "phi");
+  return why;
+}
+
+// One fit through the raw ABI, as the host makes it (defaults filled in from the key table),
+// on a copy of the data and of the model's coefficients (a learner that writes into its
+// inputs spoils only the copy; the inputs-untouched clause compares them).
 class Fit {
  public:
   Fit(const spml_learner& l, const Data& train, std::uint64_t seed, const std::vector<std::pair<std::string, std::string>>& given)
-      : l_(l) {
+      : l_(l), data_(train), prior_(kPrior, kPrior + kParams), truth_(kTheta, kTheta + kParams) {
     const auto config = with_defaults(l.config_keys, given);
     std::vector<const char*> keys, values;
     for (const auto& [k, v] : config) {
@@ -75,9 +96,9 @@ class Fit {
     }
     const spml_learner_config c{static_cast<int32_t>(keys.size()), keys.data(), values.data(), seed};
     static const char* const names[kParams] = {"theta0", "theta1", "theta2"};
-    const spml_learner_model m{kParams, names, (l.flags & SPML_LEARNER_NEEDS_PRIOR) ? prior() : nullptr,
-                               (l.flags & SPML_LEARNER_NEEDS_TRUTH) ? kTheta : nullptr};
-    const spml_learner_data d = train.view();
+    const spml_learner_model m{kParams, names, (l.flags & SPML_LEARNER_NEEDS_PRIOR) ? prior_.data() : nullptr,
+                               (l.flags & SPML_LEARNER_NEEDS_TRUTH) ? truth_.data() : nullptr};
+    const spml_learner_data d = data_.view();
     char error[1024] = "";
     state_ = l.fit(&d, &m, &c, error, sizeof error);
     error_ = error;
@@ -89,13 +110,18 @@ class Fit {
   Fit& operator=(const Fit&) = delete;
   void* state() const { return state_; }
   const std::string& error() const { return error_; }
+  // What fit wrote into its inputs (compared with `given`, the data it was made from).
+  std::string inputs_changed(const Data& given) const {
+    std::string why = data_changed(given, data_);
+    if (why.empty()) why = changed(std::vector<double>(kPrior, kPrior + kParams), prior_.data(), "model prior");
+    if (why.empty()) why = changed(std::vector<double>(kTheta, kTheta + kParams), truth_.data(), "model truth");
+    return why;
+  }
 
  private:
-  static const double* prior() {
-    static const double p[kParams] = {0.9 * kTheta[0] + 0.05, 0.9 * kTheta[1] + 0.05, 0.9 * kTheta[2] + 0.05};
-    return p;
-  }
   const spml_learner& l_;
+  const Data data_;
+  const std::vector<double> prior_, truth_;
   void* state_ = nullptr;
   std::string error_;
 };
@@ -106,7 +132,10 @@ struct Prediction {
   std::vector<double> mean, var;   // pre-filled with NaN: what stays NaN was not written
 };
 
-Prediction predict(const spml_learner& l, const Fit& fit, const Data& query) {
+// Predicts on a copy of `query`; `used` (when given) receives the copy as predict left it.
+Prediction predict(const spml_learner& l, const Fit& fit, const Data& given, Data* used = nullptr) {
+  Data copy = given;
+  const Data& query = copy;
   Prediction p;
   p.mean.assign(static_cast<size_t>(query.rows * kOutputs), kNaN);
   const bool has_var = l.flags & SPML_LEARNER_VARIANCE;
@@ -115,6 +144,7 @@ Prediction predict(const spml_learner& l, const Fit& fit, const Data& query) {
   char error[1024] = "";
   p.rc = l.predict(fit.state(), &d, p.mean.data(), has_var ? p.var.data() : nullptr, error, sizeof error);
   p.error = error;
+  if (used) *used = std::move(copy);
   return p;
 }
 
@@ -178,6 +208,19 @@ Outcome coefficients(const spml_learner& l, const Fit& fit) {
   return pass(std::to_string(n) + " finite values (" + num(theta[0]) + ", " + num(theta[1]) + ", " + num(theta[2]) + ")");
 }
 
+// The inputs are const in the ABI: a learner that writes into x, y, phi or the model's
+// coefficients (during fit or predict) corrupts the host's dataset for every later learner.
+Outcome inputs_untouched(const spml_learner& l, const Data& train, const Data& query, std::uint64_t seed,
+                         const std::vector<std::pair<std::string, std::string>>& given) {
+  Fit fit(l, train, seed, given);
+  if (std::string why = fit.inputs_changed(train); !why.empty()) return fail("fit wrote into its inputs: " + why);
+  if (!fit.state()) return fail("the fit failed: " + fit.error());
+  Data used;
+  predict(l, fit, query, &used);
+  if (std::string why = data_changed(query, used); !why.empty()) return fail("predict wrote into its query: " + why);
+  return pass("x, y, phi, prior and truth byte for byte the same after fit and predict");
+}
+
 Outcome nan_refused(const spml_learner& l, const Data& train, std::uint64_t seed,
                     const std::vector<std::pair<std::string, std::string>>& given) {
   for (const char* where : {"X", "Y"}) {
@@ -234,6 +277,7 @@ void check_one(const spml_learner& l, Recorder& r) {
     if (p.rc == 0) return fail("predict accepted a query of " + std::to_string(kInputs + 1) + " inputs after a fit on " + std::to_string(kInputs));
     return p.error.empty() ? fail("refused a query of another width without a message") : pass("refused: " + p.error);
   });
+  r.run(name, "inputs-untouched", [&] { return inputs_untouched(l, train, query, r.seed(), given); });
   r.run(name, "nan-refused", [&] { return nan_refused(l, train, r.seed(), given); });
 }
 

@@ -6,9 +6,12 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <map>
 #include <set>
 
 #include "detail.h"
+#include "spml/force_effects.h"
+#include "spml/learners/learner.h"
 #include "spml/parse.h"
 #include "spml/plugin_loader.h"
 
@@ -48,7 +51,50 @@ std::string one_key_problem(const spml_config_key& k, bool force_plugin) {
   return "";
 }
 
+// Every plugin's key table in a library, by plugin name; empty when it does not load (its
+// check then fails the abi-version clause, which is where that is reported).
+std::vector<std::pair<std::string, const spml_config_key*>> key_tables(const std::string& file, std::shared_ptr<PluginLibrary>* keep) {
+  std::string problem;
+  const std::string kind = kind_of(file, &problem);
+  if (kind.empty()) return {};
+  try {
+    *keep = std::make_shared<PluginLibrary>(file, kind == "learner" ? learner_plugin_kind() : force_plugin_kind());
+  } catch (const PluginError&) {
+    return {};
+  }
+  std::vector<std::pair<std::string, const spml_config_key*>> out;
+  for (const void* e : (*keep)->entries())
+    out.emplace_back(static_cast<const PluginEntryHead*>(e)->name,
+                     kind == "learner" ? static_cast<const spml_learner*>(e)->config_keys : static_cast<const spml_force_plugin*>(e)->config_keys);
+  return out;
+}
+
 }  // namespace
+
+std::string config_problem(const std::vector<std::string>& files, const std::vector<std::pair<std::string, std::string>>& config) {
+  if (config.empty()) return "";
+  std::vector<std::shared_ptr<PluginLibrary>> keep(files.size());
+  std::vector<std::pair<std::string, const spml_config_key*>> tables;
+  for (size_t i = 0; i < files.size(); ++i)
+    for (auto& t : key_tables(files[i], &keep[i])) tables.push_back(std::move(t));
+  for (const auto& [key, value] : config) {
+    bool known = false;
+    for (const auto& [plugin, table] : tables)
+      if (const spml_config_key* k = find_config_key(table, key)) {
+        known = true;
+        if (std::string why = check_config_value(*k, value); !why.empty())
+          return key + "=" + value + ": " + plugin + "'s key '" + key + "': " + why;
+      }
+    if (known) continue;
+    std::map<std::string, std::string> listed;   // plugin -> its keys
+    for (const auto& [plugin, table] : tables) listed[plugin] = config_key_list(table);
+    std::string keys;
+    for (const auto& [plugin, list] : listed) keys += (keys.empty() ? "" : "; ") + plugin + ": " + (list.empty() ? "(no keys)" : list);
+    return key + "=" + value + ": no plugin in " + (files.size() == 1 ? "this library" : "these libraries") +
+           " has the key '" + key + "' (" + (keys.empty() ? "no plugin could be loaded" : keys) + ")";
+  }
+  return "";
+}
 
 bool LibraryReport::passed() const {
   for (const auto& c : clauses)

@@ -120,6 +120,9 @@ void add_check_plugin(CLI::App& app) {
       if (eq == std::string::npos || eq == 0) throw CLI::ValidationError("--set", "'" + kv + "': expected key=value");
       options.config.emplace_back(kv.substr(0, eq), kv.substr(eq + 1));
     }
+    std::vector<std::string> absolute;
+    for (const auto& f : *files) absolute.push_back(std::filesystem::absolute(f).string());
+    if (std::string why = check::config_problem(absolute, options.config); !why.empty()) throw CLI::ValidationError("--set", why);
     const auto t0 = std::chrono::steady_clock::now();
     nlohmann::json libraries = nlohmann::json::array();
     int failed = 0, clauses = 0;

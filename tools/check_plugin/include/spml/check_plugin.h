@@ -53,6 +53,12 @@ struct CheckOptions {
 // Runs the suite on one library file. Never throws for a bad plugin (that is a failed clause).
 LibraryReport check_library(const std::string& file, const CheckOptions& options = {});
 
+// What is wrong with `config` (--set) for the plugins of `files`, "" when nothing: a key that
+// no plugin has (a typo: the message lists every plugin's keys), or a value that does not suit
+// the key of a plugin that has it (type, bounds): "KEY=VALUE: ...". A usage error, checked
+// before any clause runs.
+std::string config_problem(const std::vector<std::string>& files, const std::vector<std::pair<std::string, std::string>>& config);
+
 // "PASS  <plugin>  <clause>: <detail>" (FAIL, SKIP), one line, for people.
 std::string clause_line(const Clause& clause);
 nlohmann::json to_json(const LibraryReport& report);
