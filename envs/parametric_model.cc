@@ -27,6 +27,7 @@ class MjcfModel : public ParametricModel {
   // `label` names the model in messages and bench.json (the file, or where inline XML came from).
   MjcfModel(const std::string& file, const std::string& label, const Dataset& ds, const Split& layout)
       : label_(label), reg_(file), base_(reg_.base_parameters()), cols_(reg_, layout) {
+    warn_inverse_mismatches(reg_, label_);
     param_names = base_.names;
     prior = base_.model_values;
     outputs = static_cast<int>(layout.Y.cols());

@@ -486,3 +486,56 @@ TEST(ParseNumber, AcceptsSubnormalsAndUnderflow) {
   EXPECT_EQ(*parse_numbers("1e-310,2"), (std::vector<double>{1e-310, 2}));
   for (const char* bad : {"1e400", "-1e400", "inf", "nan", "1e-310x", ""}) EXPECT_FALSE(parse_number(bad)) << bad;
 }
+
+// The regressor against mj_inverse on load (envs/regressor_check.cc): silent where it is exact,
+// and where the model holds what it does not express, the joint named with the likely reason.
+namespace {
+std::vector<spml::InverseMismatch> mismatches_of(const std::string& xml) {
+  auto dir = spml::test::temp_dir("inverse-check");
+  const std::string file = (dir / "m.xml").string();
+  std::ofstream(file) << xml;
+  MjcfRegressor reg(file);
+  auto out = reg.inverse_mismatches();
+  std::filesystem::remove_all(dir);
+  return out;
+}
+std::string arm_with(const std::string& joint1_extra, const std::string& before_end) {
+  std::ifstream in(mjcf_path("planar_arm3.xml"));
+  std::string xml((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  xml.replace(xml.find("<joint name=\"joint1\"/>"), 22, "<joint name=\"joint1\" " + joint1_extra + "/>");
+  xml.replace(xml.find("</mujoco>"), 9, before_end + "</mujoco>");
+  return xml;
+}
+}  // namespace
+
+TEST(MjcfRegressor, InverseCheckIsSilentWhereTheRegressorIsExact) {
+  for (const char* f : {"planar_arm3.xml", "planar_arm3_gl.xml"}) {
+    MjcfRegressor reg(mjcf_path(f));
+    const auto mm = reg.inverse_mismatches();
+    EXPECT_TRUE(mm.empty()) << f << ": " << (mm.empty() ? "" : spml::inverse_mismatch_text(mm[0]));
+  }
+}
+
+TEST(MjcfRegressor, InverseCheckNamesFrictionlossStatefulPluginsAndConstraints) {
+  // frictionloss 5 on joint1: MuJoCo's soft constraint, not 5 sign(qd).
+  auto fl = mismatches_of(arm_with("frictionloss=\"5\"", ""));
+  ASSERT_EQ(fl.size(), 1u);
+  std::printf("%s\n", spml::inverse_mismatch_text(fl[0]).c_str());
+  EXPECT_EQ(fl[0].joint, "joint1");
+  EXPECT_GT(fl[0].relative, 1e-3);   // the constraint force differs from 5 sign(qd) by up to 10 Nm on ~50 Nm RMS
+  EXPECT_NE(spml::inverse_mismatch_text(fl[0]).find("frictionloss (MuJoCo applies it as a soft constraint"), std::string::npos)
+      << spml::inverse_mismatch_text(fl[0]);
+  // A stateful plugin (LuGre stick-slip) has no regressor columns.
+  auto ss = mismatches_of(arm_with("", "<custom><text name=\"spml.plugin.ss\" data=\"type=stick_slip joints=joint1 fc=3 fs=4.5 "
+                                       "vs=0.05 sigma0=20000 sigma1=10 sigma2=0.1\"/></custom>"));
+  ASSERT_EQ(ss.size(), 1u);
+  std::printf("%s\n", spml::inverse_mismatch_text(ss[0]).c_str());
+  EXPECT_EQ(ss[0].joint, "joint1");
+  EXPECT_NE(spml::inverse_mismatch_text(ss[0]).find("the declared plugin 'ss' (stick_slip, stateful) has no regressor columns"),
+            std::string::npos)
+      << spml::inverse_mismatch_text(ss[0]);
+  // An equality constraint couples joint1 and joint2.
+  auto eq = mismatches_of(arm_with("", "<equality><joint joint1=\"joint1\" joint2=\"joint2\"/></equality>"));
+  ASSERT_FALSE(eq.empty());
+  for (const auto& mm : eq) EXPECT_NE(spml::inverse_mismatch_text(mm).find("an equality constraint"), std::string::npos) << mm.joint;
+}

@@ -98,6 +98,7 @@ void add_identify(CLI::App& app) {
     if (consistent)
       return identify_consistent_command({a->model, a->data, a->split, a->write_model, a->json, a->offsets, a->prior_weight});
     MjcfRegressor reg(a->model, RegressorOptions{a->offsets});
+    warn_inverse_mismatches(reg, a->model);
     auto base = reg.base_parameters();
     warn_close_call(base);
     Dataset ds = read_dataset(a->data);

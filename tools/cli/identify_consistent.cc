@@ -102,6 +102,7 @@ std::vector<std::string> write_model(const ConsistentArgs& a, const MjcfRegresso
 
 void identify_consistent_command(const ConsistentArgs& a) {
   const MjcfRegressor reg(a.model, RegressorOptions{a.offsets});
+  warn_inverse_mismatches(reg, a.model);
   const Dataset ds = read_dataset(a.data);
   // Least squares on base parameters, for comparison; it fails where the data leave a base
   // parameter free, which the consistent fit takes from the prior.

@@ -1,6 +1,7 @@
 // Stage 1, load: the model, its base parameters, the dataset and the splits diagnose works on.
 #include <algorithm>
 #include <cmath>
+#include <iostream>
 
 #include "diagnosis.h"
 #include "spml/matrix_file.h"
@@ -16,6 +17,12 @@ void Diagnosis::load() {
   // since the `parameters` cause and the written inertials rest on it.
   notes_.push_back("base parameters: " + rank_decision_text(base_, reg_->param_names().size()));
   if (const std::string w = rank_decision_warning(base_); !w.empty()) notes_.push_back(w);
+  // The model's own inverse dynamics against the regressor: what the regressor leaves out
+  // (frictionloss, a stateful plugin, constraints) is said, per joint, before anything is named.
+  for (const auto& mm : reg_->inverse_mismatches()) {
+    notes_.push_back(inverse_mismatch_text(mm));
+    std::cerr << "spml: warning: " << opt_.model << ": " << notes_.back() << "\n";
+  }
   ds_ = read_dataset(opt_.data);
   const std::string where = opt_.data + ": ";
   Split fit_part, test_part;

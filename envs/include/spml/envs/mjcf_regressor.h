@@ -28,6 +28,20 @@ struct RegressorOptions {
   bool coulomb_only_where_modelled = false;
 };
 
+// A joint where the regressor times the model's own values (plugins' included) differs from
+// MuJoCo's inverse dynamics of the model (envs/regressor_check.cc).
+struct InverseMismatch {
+  std::string joint;
+  double relative = 0;   // worst |Y pi - qfrc_inverse| over the states / RMS of qfrc_inverse
+  double worst = 0, rms = 0;
+  std::vector<std::string> reasons;   // the likely ones: unmodelled plugins, constraint kinds
+};
+// "joint 'j': ... differs ... by up to ... likely <reasons> ...", for a warning or a note.
+std::string inverse_mismatch_text(const InverseMismatch& mismatch);
+class MjcfRegressor;
+// "spml: warning: <file>: <text>" on stderr for every mismatch of reg (identify, bench --model).
+void warn_inverse_mismatches(const MjcfRegressor& reg, const std::string& file);
+
 class MjcfRegressor {
  public:
   MjcfRegressor(const std::string& mjcf_file, const RegressorOptions& options = {});
@@ -73,6 +87,17 @@ class MjcfRegressor {
   // Random states in joint ranges (or +-pi / +-1 m), velocities and accelerations; `samples`
   // states stacked. Deterministic for a given seed.
   Base base_parameters(int samples = 400, std::uint64_t seed = 1) const;
+
+  // Y * model_params() against mj_inverse (qfrc_inverse; every declared plugin's force added,
+  // stateful ones at their first state) at `states` seeded states (positions and accelerations
+  // drawn as base_parameters draws them, speeds log-uniform in [3e-3, 3]); the joints where
+  // they differ by more than kInverseTolerance of the joint's RMS torque.
+  std::vector<InverseMismatch> inverse_mismatches(int states = 50, std::uint64_t seed = 1) const;
+  // Where the regressor is exact the two agree to rounding: 1e-12 of the torque on the
+  // project's models (tests: 1e-8 absolute on torques of 1-100). An element the regressor
+  // leaves out shows at its own size, a frictionloss of 1 % of the torque as 1e-2. 1e-6 lies
+  // six decades from either, and a mismatch below it is far below any sensor's noise.
+  static constexpr double kInverseTolerance = 1e-6;
 
   // Relative singular values below this are dropped: rounding a model's angles to 4 decimals
   // (up to 5e-5 rad, as URDF files do) leaves singular values of about that size where exact
