@@ -97,6 +97,21 @@ TEST(ForcePlugins, ClosedForms) {
   EXPECT_EQ(a.fx->param_names().size(), 8u);
 }
 
+// Parameter names are unique: non-integer harmonic orders keep their digits (1.5 and 1.7 were
+// both "h1"), and an order given twice is refused.
+TEST(ForcePlugins, RippleParameterNamesAreUnique) {
+  Loaded r(decl("rip", "type=ripple joints=a,b gear=30 harmonics=1.5,1.7,2 amplitudes=1,2,3"));
+  const auto names = r.fx->param_names();
+  EXPECT_EQ(names, (std::vector<std::string>{"rip.a.h1p5.sin", "rip.a.h1p5.cos", "rip.a.h1p7.sin", "rip.a.h1p7.cos", "rip.a.h2.sin",
+                                             "rip.a.h2.cos", "rip.b.h1p5.sin", "rip.b.h1p5.cos", "rip.b.h1p7.sin", "rip.b.h1p7.cos",
+                                             "rip.b.h2.sin", "rip.b.h2.cos"}));
+  const double q = 0.123;
+  EXPECT_NEAR(r.force(q, 0, 0, 0)[0], std::sin(45 * q) + 2 * std::sin(51 * q) + 3 * std::sin(60 * q), 1e-12);
+  r.expect_regressor_consistent(q, 0.2, 0, 0);
+  const std::string err = error_of(decl("rip", "type=ripple joints=a gear=30 harmonics=2,2 amplitudes=1,2"));
+  EXPECT_NE(err.find("key 'harmonics': harmonic 2 given twice"), std::string::npos) << err;
+}
+
 TEST(ForcePlugins, FrictionBandActsOnlyInsideItsInterval) {
   Loaded b(decl("band", "type=friction_band joints=a lower=0.15 upper=0.25 level=100"));
   for (double q = -0.5; q <= 0.5; q += 0.001) {

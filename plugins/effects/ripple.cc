@@ -2,6 +2,8 @@
 // drive ripple model the paper borrows from Godler et al. (1999): harmonics h of the gear
 // ratio. Written as s_h sin(h*gear*q) + c_h cos(h*gear*q) with s = a cos(phi), c = a sin(phi)
 // it is linear in (s_h, c_h), which are the parameters exposed.
+#include <algorithm>
+
 #include "spml/effect_base.h"
 
 namespace spml::effects {
@@ -18,6 +20,15 @@ struct Ripple {
   static constexpr spml_shape_param kShape[] = {{"gear", SPML_SHAPE_ABSOLUTE, 1, 200, 0, 1}, {nullptr, 0, 0, 0, 0, 0}};
   static constexpr bool kLinear = true;
 
+  // "8" for a whole order; "1p5" for 1.5 (exact digits, '.' separates the parts of a parameter
+  // name): distinct orders give distinct names.
+  static std::string harmonic_label(double h) {
+    if (h == std::floor(h)) return std::to_string(static_cast<long long>(h));
+    std::string t = exact_text(h);
+    std::replace(t.begin(), t.end(), '.', 'p');
+    return t;
+  }
+
   explicit Ripple(const EffectConfig& c) : joints(c.joints), gear(c.number("gear")), harmonics(c.list("harmonics")) {
     require(gear > 0, "gear must be > 0");
     // One value per harmonic (shared by all joints), or one per harmonic and joint (joint-major).
@@ -31,10 +42,13 @@ struct Ripple {
       if (v.size() == H) for (size_t j = 1; j < J; ++j) v.insert(v.end(), v.begin(), v.begin() + static_cast<long>(H));
       return v;
     };
+    for (size_t h = 0; h < H; ++h)
+      for (size_t k = 0; k < h; ++k)
+        require(harmonics[k] != harmonics[h], "key 'harmonics': harmonic " + exact_text(harmonics[h]) + " given twice");
     auto amp = per_joint_harmonic("amplitudes", 0.0), phase = per_joint_harmonic("phases", 0.0);
     for (size_t j = 0; j < J; ++j)
       for (size_t h = 0; h < H; ++h) {
-        std::string base = joints[j].name + ".h" + std::to_string(static_cast<long>(harmonics[h]));
+        std::string base = joints[j].name + ".h" + harmonic_label(harmonics[h]);
         theta.push_back(amp[j * H + h] * std::cos(phase[j * H + h]));
         names.push_back(base + ".sin");
         theta.push_back(amp[j * H + h] * std::sin(phase[j * H + h]));
