@@ -529,6 +529,50 @@ TEST(Evaluator, ScoresUseScaledSums) {
   }
 }
 
+// LLS on a regressor with constant and duplicated columns, through the learner itself: the
+// minimum-norm least-squares fit (issue #21: the reviewer's run gave RMSE 6e13 where numpy's
+// lstsq gives 8.0). Closed forms: phi = (3, 3) on every row: every prediction is mean(y), the
+// RMSE on the training rows is std(y) (population), theta = (mean(y)/6, mean(y)/6); phi =
+// (x, x, 1): the predictions of the ordinary fit on (x, 1), theta's two x-coefficients equal.
+TEST(LeastSquares, ConstantAndDuplicatedColumnsGiveTheMinimumNormFit) {
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u(-2, 2);
+  const Eigen::Index n = 200;
+  RowMatrix X(n, 1), Y(n, 1);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    X(i, 0) = u(rng);
+    Y(i, 0) = 3 + 2 * X(i, 0) + 0.5 * std::sin(5 * X(i, 0)) + 0.3 * u(rng);
+  }
+  auto fit_predict = [&](const RowMatrix& phi, Eigen::VectorXd* theta) {
+    std::vector<std::string> names;
+    for (Eigen::Index k = 0; k < phi.cols(); ++k) names.push_back("p" + std::to_string(k));
+    const LearnerModel m{names, Eigen::VectorXd::Zero(phi.cols()), Eigen::VectorXd()};
+    auto l = registry().create("LLS");
+    l->fit(LearnerData{&X, &Y, &phi, 1}, m, LearnerConfig{});
+    *theta = l->coefficients();
+    return RowMatrix(l->predict(LearnerData{&X, nullptr, &phi, 1}).mean);
+  };
+  Eigen::VectorXd theta;
+  const RowMatrix constant = RowMatrix::Constant(n, 2, 3.0);
+  const RowMatrix pc = fit_predict(constant, &theta);
+  const double mean = Y.mean(), sd = std::sqrt((Y.array() - mean).square().mean());
+  EXPECT_LT((pc.array() - mean).abs().maxCoeff(), 1e-12 * std::fabs(mean));
+  const double rmse = std::sqrt((pc - Y).squaredNorm() / static_cast<double>(n));
+  EXPECT_NEAR(rmse, sd, 1e-12 * sd);
+  ASSERT_EQ(theta.size(), 2);
+  EXPECT_NEAR(theta[0], mean / 6, 1e-12 * std::fabs(mean));
+  EXPECT_NEAR(theta[1], mean / 6, 1e-12 * std::fabs(mean));
+
+  RowMatrix dup(n, 3), plain(n, 2);
+  dup << X, X, Eigen::VectorXd::Ones(n);
+  plain << X, Eigen::VectorXd::Ones(n);
+  Eigen::VectorXd theta_plain;
+  const RowMatrix pd = fit_predict(dup, &theta), pp = fit_predict(plain, &theta_plain);
+  EXPECT_LT((pd - pp).cwiseAbs().maxCoeff(), 1e-10 * Y.cwiseAbs().maxCoeff());
+  EXPECT_NEAR(theta[0], theta[1], 1e-10 * std::fabs(theta_plain[0]));
+  EXPECT_NEAR(theta[0] + theta[1], theta_plain[0], 1e-10 * std::fabs(theta_plain[0]));
+}
+
 // Constant inputs: every regressor row is the same phi_c, rank 1, and the minimum-norm least
 // squares solution is theta = phi_c * mean(y) / |phi_c|^2 (numpy's lstsq gives it: RMSE 8.0 on
 // Toy's test_interp). With Eigen's default pivot threshold LLS kept rounding residue as rank
