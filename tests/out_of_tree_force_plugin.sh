@@ -68,7 +68,8 @@ c = [e for n, e in zip(j["names"], j["estimate"]) if n.endswith(".c")]
 assert len(c) == 1 and abs(c[0] - 0.7) < 1e-9, f"identify: c = {c} (names {j['names']})"
 print(f"identify --plugin-path: c = {c[0]:.12g} (true 0.7)")
 PY
-rmse() { awk -F, 'NR > 1 && $2 == "test" && $4 == "LLS-prior" {print $5}' "$1/results.csv"; }
+rmse() { awk -F, 'NR == 1 {for (i = 1; i <= NF; i++) c[$i] = i; next}   # columns by name
+  $c["split"] == "test" && $c["algo"] == "LLS-prior" {print $c["rmsemean"]}' "$1/results.csv"; }
 with=$(rmse "$work/with") without=$(rmse "$work/without")
 echo "LLS-prior test RMSE: with the plugin declared $with, without $without"
 awk -v w="$with" -v wo="$without" 'BEGIN {

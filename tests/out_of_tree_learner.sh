@@ -14,7 +14,8 @@ cmake --build "$work/ridge" >/dev/null
 "$spml" generate --scenario toy --out "$work/toy.h5" --quiet
 "$spml" bench --data "$work/toy.h5" --out "$work/bench" --learner-path "$work/ridge/ridge_learner.so" \
   --learners Ridge,LLS,Ridge-GP --reps 1 2>/dev/null
-rmse() { awk -F, -v a="$1" '$2=="test_interp" && $4==a {print $5}' "$work/bench/results.csv"; }
+rmse() { awk -F, -v a="$1" 'NR == 1 {for (i = 1; i <= NF; i++) c[$i] = i; next}   # columns by name
+  $c["split"] == "test_interp" && $c["algo"] == a {print $c["rmsemean"]}' "$work/bench/results.csv"; }
 ridge=$(rmse Ridge) lls=$(rmse LLS) ridge_gp=$(rmse Ridge-GP)
 echo "Ridge $ridge  LLS $lls  Ridge-GP $ridge_gp"
 awk -v r="$ridge" -v l="$lls" -v g="$ridge_gp" 'BEGIN {

@@ -260,6 +260,14 @@ TEST(Bench, SimDynLocalBandSpgpBeatsLls) {
   const double lls = res["test_interp/0/LLS"].rmse_mean, spgp = res["test_interp/0/SPGP"].rmse_mean;
   EXPECT_GT(lls, 30.0);           // the band is outside the model: paper 38.43
   EXPECT_LT(spgp, 0.7 * lls) << "SPGP " << spgp << " LLS " << lls;   // paper 19.07 vs 38.43
+  // results schema 2: outputs by the dataset's column names, with their unit
+  EXPECT_EQ(res["test_interp/2/LLS"].output_name, "tau:joint2");
+  EXPECT_EQ(res["test_interp/2/LLS"].unit, "N·m");
+  const MatrixFile p = read_matrix_file(o.out + "/predictions.h5");
+  EXPECT_EQ(p.attributes.at("format"), "spml-predictions/2");
+  EXPECT_EQ(p.attributes.at("outputs"), "tau:joint0,tau:joint1,tau:joint2");
+  EXPECT_EQ(p.attributes.at("units"), "N·m,N·m,N·m");
+  EXPECT_EQ(p.attributes.at("input_units").substr(0, 12), "rad,rad,rad,");
 }
 
 // All 5000 training rows (the staged fit: 1000-row subset, then 6 evaluations on all rows),
@@ -615,6 +623,38 @@ TEST(Results, FieldsWithCommasAndQuotesRoundTrip) {
   const auto py = test::run("/usr/bin/python3 -c \"import csv,sys; r=next(csv.DictReader(open(sys.argv[1]))); "
                             "print(r['scenario'] + '|' + r['split'] + '|' + r['rmsemean'])\" " + file.string());
   EXPECT_EQ(py.output, "toy,v2|test \"a,b\"|1.5\n");
+}
+
+// Schema 2 names each output and gives its unit; a schema-1 file (spml before the bump:
+// `output` the index, no `output_index`) is still read, its outputs shown by index.
+TEST(Results, SchemaTwoNamesOutputsAndSchemaOneIsStillRead) {
+  ResultRow row{"via-inst", "test", "LLS", 0, 4.5, 0, 4.5, 4.5, INFINITY, 0, INFINITY, INFINITY, 1, 0.25, "", "tau:link", "N·m"};
+  const fs::path dir = test::temp_dir("results-schema");
+  std::ofstream(dir / "v2.csv") << results_header() << "\n" << results_line(row) << "\n";
+  EXPECT_EQ(results_header().substr(0, 41), "scenario,split,output,output_index,unit,a");
+  const auto v2 = read_results((dir / "v2.csv").string());
+  ASSERT_EQ(v2.size(), 1u);
+  EXPECT_EQ(v2[0].output, 0);
+  EXPECT_EQ(v2[0].output_name, "tau:link");
+  EXPECT_EQ(output_label(v2[0]), "tau:link [N·m]");
+  std::ofstream(dir / "v1.csv") << "scenario,split,output,algo,rmsemean,rmsestd,rmsemin,rmsemax,nllhmean,nllhstd,nllhmin,nllhmax,"
+                                   "fits,fitsec,warnings\nvia-inst,test,0,LLS,4.5,0,4.5,4.5,inf,0,inf,inf,1,0.25,\n";
+  const auto v1 = read_results((dir / "v1.csv").string());
+  ASSERT_EQ(v1.size(), 1u);
+  EXPECT_EQ(v1[0].output, 0);
+  EXPECT_EQ(v1[0].output_name, "");
+  EXPECT_EQ(output_label(v1[0]), "output 0");
+  for (const char* f : {"v1.csv", "v2.csv"}) {
+    const auto r = test::run(test::spml_bin() + " compare --results " + (dir / f).string());
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    EXPECT_NE(r.output.find(std::string("== via-inst / test / ") + (f[1] == '1' ? "output 0" : "tau:link [N·m]") +
+                            "  (paper: vda_instant.csv)"), std::string::npos) << r.output;
+  }
+  EXPECT_EQ(column_unit("qd:joint1"), "rad/s");
+  EXPECT_EQ(column_unit("qdd:joint1"), "rad/s²");
+  EXPECT_EQ(column_unit("q:joint1"), "rad");
+  EXPECT_EQ(column_unit("force:carriage"), "N");
+  EXPECT_EQ(column_unit("y"), "");
 }
 
 TEST(Bench, MergeTakesEachUnitFromItsOwnShardAndRefusesAShardAsOutput) {

@@ -53,6 +53,7 @@ class Hasher {
 };
 
 constexpr const char* kManifestFormat = "spml-bench/3";
+constexpr const char* kPredictionsFormat = "spml-predictions/2";   // 2: root attributes `outputs`, `units`, `inputs`, `input_units`
 
 // "elapsed, ETA" after each fitted unit: the mean time of the units fitted so far times the
 // units of this run still to fit (units found done take no time and are not counted).
@@ -352,8 +353,8 @@ MatrixFile fit_unit(Learner& learner, const std::vector<Part>& parts, const Lear
 
 // results.csv rows and predictions of one learner from its units (all repetitions present).
 void aggregate(const std::string& scenario, const std::string& name, bool deterministic, int reps,
-               const std::vector<MatrixFile>& units, const std::vector<Part>& parts, std::vector<ResultRow>& rows,
-               MatrixFile& predictions) {
+               const std::vector<MatrixFile>& units, const std::vector<Part>& parts, const std::vector<std::string>& outputs,
+               std::vector<ResultRow>& rows, MatrixFile& predictions) {
   double fitsec = 0;
   std::string warnings;
   for (const auto& u : units) {
@@ -384,7 +385,7 @@ void aggregate(const std::string& scenario, const std::string& name, bool determ
     for (size_t k = 0; k < rmse.size(); ++k) {
       const Summary a = summarize(rmse[k]), b = summarize(nllh[k]);
       rows.push_back({scenario, part.name, name, static_cast<int>(k), a.mean, a.std, a.min, a.max, b.mean, b.std, b.min,
-                      b.max, static_cast<int>(units.size()), fitsec, warnings});
+                      b.max, static_cast<int>(units.size()), fitsec, warnings, outputs[k], column_unit(outputs[k])});
     }
   }
 }
@@ -470,9 +471,19 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bo
 
   std::vector<ResultRow> rows;
   MatrixFile predictions;
-  predictions.attributes["format"] = "spml-predictions/1";
+  predictions.attributes["format"] = kPredictionsFormat;
   predictions.attributes["data"] = fs::absolute(o.data).string();
   predictions.attributes["scenario"] = scenario;
+  // The outputs by name and unit, in the column order of every y, mean and std (format 2).
+  auto listed = [](const std::vector<std::string>& columns, bool units) {
+    std::string text;
+    for (size_t i = 0; i < columns.size(); ++i) text += (i ? "," : "") + (units ? column_unit(columns[i]) : columns[i]);
+    return text;
+  };
+  predictions.attributes["outputs"] = listed(train_split.y_columns, false);
+  predictions.attributes["units"] = listed(train_split.y_columns, true);
+  predictions.attributes["inputs"] = listed(train_split.x_columns, false);
+  predictions.attributes["input_units"] = listed(train_split.x_columns, true);
   for (size_t pi = 1; pi < parts.size(); ++pi) {
     predictions.matrices[parts[pi].name + "/y"] = parts[pi].Y;
     RowMatrix idx(static_cast<Eigen::Index>(parts[pi].rows.size()), 1);
@@ -539,7 +550,8 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bo
         break;
       }
     }
-    if (static_cast<int>(units.size()) == fits) aggregate(scenario, name, deterministic, o.reps, units, parts, rows, predictions);
+    if (static_cast<int>(units.size()) == fits)
+      aggregate(scenario, name, deterministic, o.reps, units, parts, train_split.y_columns, rows, predictions);
   }
 
   // predictions.h5 first: when it cannot be written (a full disk), no results.csv claims the run.

@@ -166,7 +166,7 @@ std::string compare_report(const std::vector<ResultRow>& results, const std::str
   for (const auto& key : order) {
     const auto& rows = groups[key];
     const ResultRow& first = *rows.front();
-    out << "\n== " << first.scenario << " / " << first.split << " / output " << first.output;
+    out << "\n== " << first.scenario << " / " << first.split << " / " << output_label(first);
     auto t = table_of.find(key);
     std::map<std::string, ResultRow> paper;
     std::vector<std::string> paper_order;
