@@ -6,6 +6,7 @@
 #include <fstream>
 #include <functional>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <random>
 
 #include "spml/envs/mujoco_model.h"
@@ -655,6 +656,86 @@ TEST(Results, SchemaTwoNamesOutputsAndSchemaOneIsStillRead) {
   EXPECT_EQ(column_unit("q:joint1"), "rad");
   EXPECT_EQ(column_unit("force:carriage"), "N");
   EXPECT_EQ(column_unit("y"), "");
+}
+
+// --set GP.key=value reaches only GP and wins over the unscoped value; a scope that is not a
+// learner of the run, or a key the scoped learner does not take, is a command-line error.
+TEST(Bench, SetScopedToOneLearner) {
+  LearnerConfig c;
+  c.values = {{"GP.max_evals", "30"}, {"max_evals", "100"}, {"SVR.C", "2"}};
+  const LearnerConfig gp = config_for(c, "GP"), spgp = config_for(c, "SPGP"), svr = config_for(c, "SVR");
+  EXPECT_EQ(gp.values, (std::vector<std::pair<std::string, std::string>>{{"max_evals", "30"}}));
+  EXPECT_EQ(spgp.values, (std::vector<std::pair<std::string, std::string>>{{"max_evals", "100"}}));
+  EXPECT_EQ(svr.values, (std::vector<std::pair<std::string, std::string>>{{"max_evals", "100"}, {"C", "2"}}));
+  EXPECT_NO_THROW(check_config(registry(), {"GP", "SVR", "SPGP"}, c));
+  auto error = [&](const std::vector<std::pair<std::string, std::string>>& values) {
+    LearnerConfig bad;
+    bad.values = values;
+    try {
+      check_config(registry(), {"LLS", "GP"}, bad);
+    } catch (const LearnerError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_EQ(error({{"SVR.C", "2"}}), "--set SVR.C=2: 'SVR' is not a learner of this run (LLS, GP)");
+  EXPECT_EQ(error({{"GP.C", "2"}}), "--set GP.C: GP does not accept the key 'C'");
+  EXPECT_EQ(error({{"LLS.max_evals", "2"}}), "--set LLS.max_evals: LLS does not accept the key 'max_evals'");
+  EXPECT_NE(error({{"GP.max_evals", "-3"}}).find("--set GP.max_evals=-3: GP: "), std::string::npos);
+  // the command line: exit 2 before anything is written; --quiet prints no progress
+  const fs::path dir = test::temp_dir("bench-set-scoped");
+  const std::string bench = test::spml_bin() + " bench --data " + scenario_file("toy") + " --learners LLS,GP --reps 1 --out ";
+  auto r = test::run(bench + (dir / "a").string() + " --set Nope.max_evals=3");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("'Nope' is not a learner of this run (LLS, GP)"), std::string::npos) << r.output;
+  r = test::run(bench + (dir / "a").string() + " --set max_eval=3");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_FALSE(fs::exists(dir / "a"));
+  r = test::run(bench + (dir / "b").string() + " --set GP.max_evals=20 --quiet");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_EQ(r.output.rfind("wrote ", 0), 0u) << r.output;   // the closing line only
+  EXPECT_EQ(r.output.find('\n'), r.output.size() - 1) << r.output;
+}
+
+// --json of learners, plugins and compare: one document each, what the text shows.
+TEST(Cli, JsonListsAndComparison) {
+  auto r = test::run(test::spml_bin() + " learners --json 2>/dev/null");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const auto learners = nlohmann::json::parse(r.output);
+  bool gp = false;
+  for (const auto& l : learners["learners"])
+    if (l["name"] == "GP") {
+      gp = true;
+      EXPECT_NE(std::find(l["flags"].begin(), l["flags"].end(), "variance"), l["flags"].end()) << l.dump();
+      bool max_evals = false;
+      for (const auto& k : l["config_keys"]) max_evals |= k["name"] == "max_evals" && k["default"] == "1000" && k["type"] == "integer";
+      EXPECT_TRUE(max_evals) << l.dump();
+    }
+  EXPECT_TRUE(gp) << r.output;
+  r = test::run(test::spml_bin() + " plugins --json 2>/dev/null");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const auto plugins = nlohmann::json::parse(r.output);
+  bool band = false;
+  for (const auto& p : plugins["plugins"])
+    if (p["name"] == "friction_band") {
+      band = p["linear"] == true && !p["shape_params"].empty() && p["shape_params"][0]["domain"] == "position_range";
+      EXPECT_TRUE(band) << p.dump();
+    }
+  EXPECT_TRUE(band) << r.output;
+  const fs::path dir = test::temp_dir("cli-json");
+  r = test::run(test::spml_bin() + " bench --quiet --data " + scenario_file("toy") + " --out " + (dir / "b").string() +
+                " --learners LLS,SVR,SVR-GP --reps 1");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = test::run(test::spml_bin() + " compare --json --results " + (dir / "b" / "results.csv").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const auto c = nlohmann::json::parse(r.output);
+  EXPECT_EQ(c["format"], "spml-compare/1");
+  ASSERT_EQ(c["groups"].size(), 2u);
+  EXPECT_EQ(c["groups"][0]["output"], "y");
+  EXPECT_EQ(c["groups"][0]["paper_table"], "toy_interp_w_noise.csv");
+  EXPECT_TRUE(c["groups"][0]["learners"][0]["nllh_mean"].is_null());   // LLS: no variance
+  EXPECT_NEAR(c["groups"][0]["learners"][0]["paper_rmse"].get<double>(), 1.29, 0.005);
+  EXPECT_EQ(c["tables"], 16);
 }
 
 TEST(Bench, MergeTakesEachUnitFromItsOwnShardAndRefusesAShardAsOutput) {

@@ -199,7 +199,8 @@ def prediction_figures(path, rows, learners, window, out, written):
                 if not chosen:
                     continue
                 ylabel = label(outputs[o], units[o], o)
-                fig, axes = plt.subplots(len(chosen), 1, figsize=(10, 2.2 * len(chosen) + 0.8), sharex=True, squeeze=False)
+                fig, axes = plt.subplots(len(chosen), 1, figsize=(10, 2.2 * len(chosen) + 0.8), sharex=True, squeeze=False,
+                                         constrained_layout=True)
                 xs = gaps_broken(x[order])
                 for ax, name in zip(axes[:, 0], chosen):
                     mean = p[f"{split}/{name}/rep0/mean"][:, o]
