@@ -6,6 +6,7 @@
 #include <fstream>
 #include <functional>
 #include <map>
+#include <mutex>
 #include <nlohmann/json.hpp>
 #include <random>
 
@@ -610,7 +611,7 @@ TEST(Bench, DataBeyondTheRangeOfSquaresIsRefused) {
 
 // A split or data file with a comma stays one field (RFC 4180 quotes) for compare and plot.
 TEST(Results, FieldsWithCommasAndQuotesRoundTrip) {
-  ResultRow row{"toy,v2", "test \"a,b\"", "LLS", 0, 1.5, 0, 1.5, 1.5, INFINITY, 0, INFINITY, INFINITY, 1, 0.25, "jitter 1e-9, retried"};
+  ResultRow row{"toy,v2", "test \"a,b\"", "LLS", 0, 1.5, 0, 1.5, 1.5, INFINITY, 0, INFINITY, INFINITY, 1, 0.25, "jitter 1e-9, retried", "", ""};
   const fs::path file = test::temp_dir("results-quotes") / "results.csv";
   std::ofstream(file) << results_header() << "\n" << results_line(row) << "\n";
   const auto back = read_results(file.string());
@@ -695,6 +696,34 @@ TEST(Bench, SetScopedToOneLearner) {
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_EQ(r.output.rfind("wrote ", 0), 0u) << r.output;   // the closing line only
   EXPECT_EQ(r.output.find('\n'), r.output.size() - 1) << r.output;
+}
+
+// Progress: after the first unit the learners not timed yet are said to be estimated, a
+// learner's later units count at its own measured time, and a long fit sends heartbeats
+// (here every millisecond, so the Toy GP's fit has some).
+TEST(Bench, ProgressSaysWhatTheEtaRestsOnAndLongFitsBeat) {
+  BenchOptions o;
+  o.data = scenario_file("toy");
+  o.learners = {"LLS", "SVR", "GP"};
+  o.reps = 1;
+  o.heartbeat_seconds = 0.001;
+  o.out = (test::temp_dir("bench-progress") / "out").string();
+  std::vector<std::string> lines;
+  std::mutex m;
+  o.log = [&](const std::string& l) {
+    std::lock_guard<std::mutex> lock(m);
+    lines.push_back(l);
+  };
+  run_bench(registry(), o);
+  auto find = [&](const std::string& prefix, const std::string& part) {
+    for (const auto& l : lines)
+      if (l.rfind(prefix, 0) == 0 && l.find(part) != std::string::npos) return true;
+    return false;
+  };
+  EXPECT_TRUE(find("[1/3] LLS rep 1/1: ", "2 learner(s) not timed yet, counted at the mean of the others"));
+  EXPECT_TRUE(find("[2/3] SVR rep 1/1: ", "1 learner(s) not timed yet"));
+  EXPECT_TRUE(find("[3/3] GP rep 1/1: still fitting, ", ""));
+  EXPECT_FALSE(find("[3/3] GP rep 1/1: ", "ETA"));   // the last unit: elapsed only
 }
 
 // --json of learners, plugins and compare: one document each, what the text shows.

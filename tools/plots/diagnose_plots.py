@@ -11,6 +11,7 @@ Reads DIR/series.csv and DIR/report.json (written by diagnose). Units come from 
 type in the model file report.json names (hinge: N·m, rad; slide/prismatic: N, m)."""
 import csv
 import json
+import math
 import os
 import sys
 import textwrap
@@ -108,15 +109,21 @@ def rollout_figure(report, units, out):
     unit = kinds.pop() if len(kinds) == 1 else "rad or m (per joint type)"
     x = np.arange(len(joints))
     fig, ax = plt.subplots(figsize=(max(6, 0.9 * len(joints) + 3), 4))
-    ax.bar(x - 0.2, [before[j] for j in joints], 0.4, color="tab:red", label="model as given")
-    ax.bar(x + 0.2, [after[j] for j in joints], 0.4, color="tab:blue", label="extended model")
+    for shift, errors, color, name in ((-0.2, before, "tab:red", "model as given"), (0.2, after, "tab:blue", "extended model")):
+        # a rollout that diverged has an infinite error (null in report.json): no bar, a mark
+        values = [float(errors[j]) if errors.get(j) is not None else math.inf for j in joints]
+        finite = [v if math.isfinite(v) else 0.0 for v in values]
+        ax.bar(x + shift, finite, 0.4, color=color, label=name)
+        for k, v in enumerate(values):
+            if not math.isfinite(v):
+                ax.annotate("diverged", (x[k] + shift, 0), rotation=90, ha="center", va="bottom", fontsize=7)
     ax.set_xticks(x)
     ax.set_xticklabels(joints, rotation=30 if len(joints) > 4 else 0, ha="right" if len(joints) > 4 else "center")
     ax.set_xlabel("joint")
     ax.set_ylabel(f"position error at {ro.get('horizon_s', 0):g} s [{unit}]")
     ax.set_title("\n".join(textwrap.wrap(
         f"open-loop rollouts under the measured torques: {ro.get('windows', '?')} windows of "
-        f"{ro.get('horizon_s', 0):g} s on '{ro.get('split', '?')}' (RMS over windows of the end error)", 60)), fontsize=10)
+        f"{ro.get('horizon_s', 0):g} s on '{ro.get('split', '?')}' (mean over windows of the |error| at the end)", 60)), fontsize=10)
     ax.legend(fontsize=8)
     ax.grid(axis="y", alpha=0.3)
     fig.tight_layout()
