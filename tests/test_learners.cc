@@ -720,7 +720,7 @@ TEST(Bench, ProgressSaysWhatTheEtaRestsOnAndLongFitsBeat) {
       if (l.rfind(prefix, 0) == 0 && l.find(part) != std::string::npos) return true;
     return false;
   };
-  EXPECT_TRUE(find("[1/3] LLS rep 1/1: ", "2 learner(s) not timed yet, counted at the mean of the others"));
+  EXPECT_TRUE(find("[1/3] LLS rep 1/1: ", "ETA ~0 s: 2 learner(s) not timed yet, counted as the slowest so far"));
   EXPECT_TRUE(find("[2/3] SVR rep 1/1: ", "1 learner(s) not timed yet"));
   EXPECT_TRUE(find("[3/3] GP rep 1/1: still fitting, ", ""));
   EXPECT_FALSE(find("[3/3] GP rep 1/1: ", "ETA"));   // the last unit: elapsed only

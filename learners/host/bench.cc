@@ -71,7 +71,7 @@ std::string clock_text(double seconds) {
 // "elapsed, ETA" after each fitted unit. A GP fit can take 10^4 times an LLS fit, so one mean
 // over all units misleads (it said 9 s for 47 s): each learner's units still to fit count at
 // the mean time of its own units (fitted in this run, or reused with the time stamped in
-// them); learners not timed yet at the mean of the timed learners, and the line says how many
+// them); learners not timed yet as the slowest timed one (a GP after LLS and SVR), and the line says how many
 // that are, so the ETA is read as the rough figure it is.
 class Progress {
  public:
@@ -82,22 +82,18 @@ class Progress {
   std::string done(const std::string& name, double seconds) {
     record(name, seconds);
     const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
-    double eta = 0, timed_mean = 0;
-    int timed = 0, untimed = 0, left = 0;
+    double eta = 0, slowest = 0;
+    int untimed = 0, left = 0;
     for (const auto& [n, l] : learners_)
-      if (l.fits > 0) {
-        timed_mean += l.seconds / l.fits;
-        ++timed;
-      }
-    timed_mean /= std::max(timed, 1);
+      if (l.fits > 0) slowest = std::max(slowest, l.seconds / l.fits);
     for (const auto& [n, l] : learners_) {
       left += l.left;
-      eta += l.left * (l.fits > 0 ? l.seconds / l.fits : timed_mean);
+      eta += l.left * (l.fits > 0 ? l.seconds / l.fits : slowest);
       untimed += l.left > 0 && l.fits == 0;
     }
     if (left <= 0) return "  (" + clock_text(elapsed) + " elapsed)";
-    return "  (" + clock_text(elapsed) + " elapsed, ETA " + clock_text(eta) +
-           (untimed ? ", " + std::to_string(untimed) + " learner(s) not timed yet, counted at the mean of the others" : "") + ")";
+    return "  (" + clock_text(elapsed) + " elapsed, ETA " + (untimed ? "~" : "") + clock_text(eta) +
+           (untimed ? ": " + std::to_string(untimed) + " learner(s) not timed yet, counted as the slowest so far" : "") + ")";
   }
   // The mean time of this learner's units so far; 0 when none is timed.
   double expected(const std::string& name) const {
