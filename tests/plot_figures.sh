@@ -28,9 +28,9 @@ PY
 done
 ls "$tmp/fig" | grep -q "tmp-" && { echo "temporary files left"; exit 1; }
 # Every figure's axes are labelled and its x data are what the label says (Toy: the input x,
-# SimDyn: time stamps in s, outputs named tau:jointK [N·m]); the diagnose figures too.
-"$spml" generate --scenario simdyn-ll --test-stride 10 --out "$tmp/simdyn.h5" --quiet > /dev/null
-"$spml" bench --data "$tmp/simdyn.h5" --out "$tmp/s" --learners LLS,LLS-prior --reps 1 --train-max 500 --test-max 1000 --quiet > /dev/null
+# VIA: time stamps in s, the output named tau:link [N·m]); the diagnose figures too.
+"$spml" generate --scenario via-inst --out "$tmp/via.h5" --quiet > /dev/null
+"$spml" bench --data "$tmp/via.h5" --out "$tmp/s" --learners LLS,LLS-prior --reps 1 --test-max 1000 --quiet > /dev/null
 here=$(cd "$(dirname "$0")" && pwd)
 SPML_PUBLISHED="$here/../data/published" /usr/bin/python3 "$here/python/test_figures.py" "$here/../tools/plots" "$tmp/b" "$tmp/s"
 # A results.csv of schema 1 (spml before outputs were named) is still drawn, its outputs by index.

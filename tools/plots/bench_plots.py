@@ -95,7 +95,9 @@ def table_figures(rows, published, out, written):
     for key, ours in groups.items():
         if key not in index:
             continue
-        paper = {p["algo"]: p for p in read_csv(os.path.join(published, index[key]))}
+        # the paper's spelling of one name differs from ours (results.h: canonical_algo)
+        paper = {p["algo"].replace("SPGP-from-zeroes", "SPGP-from-zeros"): p
+                 for p in read_csv(os.path.join(published, index[key]))}
         algos = [r["algo"] for r in ours]
         algos += [a for a in paper if a not in algos]
         ours_by = {r["algo"]: r for r in ours}
