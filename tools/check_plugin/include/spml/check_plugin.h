@@ -48,7 +48,14 @@ struct CheckOptions {
   // keys keep their defaults. Plugins without the key ignore it.
   std::vector<std::pair<std::string, std::string>> config;
   std::function<void(const Clause&)> on_clause;         // called as each clause finishes
+  // Only the plugin of this name (its clauses, after the library's own); "" for all of them.
+  // The command runs each plugin of a library in a child of its own, two at a time.
+  std::string only_plugin;
 };
+
+// The names of the plugins a library provides, in its order; empty when it does not load as
+// either kind (its check then says why).
+std::vector<std::string> plugin_names(const std::string& file);
 
 // Runs the suite on one library file. Never throws for a bad plugin (that is a failed clause).
 LibraryReport check_library(const std::string& file, const CheckOptions& options = {});
