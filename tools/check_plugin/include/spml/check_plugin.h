@@ -6,9 +6,11 @@
 //                whose defaults parse and lie within their own bounds, with help for every key;
 //   learners     on seeded synthetic data (check_learner.cc): outputs written and finite,
 //                variances > 0, DETERMINISTIC and same-seed repeats identical, coefficients,
-//                a query of another width refused, NaN in the fit data refused;
+//                a query of another width refused, NaN in the fit data refused, the inputs
+//                left byte for byte as they were;
 //   force plugins on an MJCF with hinge and slide joints (check_force_plugin.cc): no hidden
-//                state, R(q, qd) theta = force, set_params(get_params()) a no-op, write_config
+//                state, only its own joints' dofs written, R(q, qd) theta = force,
+//                set_params(get_params()) a no-op, write_config
 //                recreates it, shape parameters valid, reset replays the first trajectory.
 #pragma once
 
