@@ -14,7 +14,7 @@ opts=(--learners LLS,GP,RandomFeatures --learner-path "$fixtures/random_features
 # depend on how many threads share a BLAS reduction (seen: NLLH 8.24661 vs 8.2466 when ctest -j2
 # left the reference two threads), and the sharding, not the threading, is what is compared.
 OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 "$SPML" bench --data "$tmp/data/toy.h5" --out "$tmp/whole" "${opts[@]}" 2> /dev/null
-strip() { cut -d, -f1-13,15- "$1"; }   # column 14 is fitsec
+strip() { cut -d, -f1-15,17- "$1"; }   # column 16 is fitsec
 diff <(strip "$tmp/whole/results.csv") <(strip "$tmp/grid/toy/merged/results.csv")
 [ "$(wc -l < "$tmp/whole/results.csv")" -eq 7 ] || { echo "expected 6 result rows"; exit 1; }
 grep -q "toy_extrap_w_noise.csv" "$tmp/grid.log"   # spml compare ran on the merged results

@@ -6,13 +6,8 @@
 # with no gravity (inverse dynamics: tau = M*qdd + bias - passive, passive = -c*qd^3). With the
 # plugin declared the model's error is at rounding level; without it, it misses c*qd^3. regressor
 # and identify find the plugin through --plugin-path and identify recovers c.
-set -euo pipefail
-build_dir=$1 source_dir=$2 spml=$3
-work=$(mktemp -d)
-trap 'rm -rf "$work"' EXIT
-cmake --install "$build_dir" --component spml_dev --prefix "$work/prefix" >/dev/null
-cmake -S "$source_dir/plugins/examples/cubic_damping" -B "$work/effect" -DCMAKE_PREFIX_PATH="$work/prefix" >/dev/null
-cmake --build "$work/effect" >/dev/null
+source "$(dirname "$0")/out_of_tree_common.sh" "$@"
+build_example plugins/examples/cubic_damping effect
 lib="$work/effect/spml_force_cubic_damping.so"
 
 "$spml" plugins --plugin-path "$lib" > "$work/plugins.txt"
@@ -68,8 +63,7 @@ c = [e for n, e in zip(j["names"], j["estimate"]) if n.endswith(".c")]
 assert len(c) == 1 and abs(c[0] - 0.7) < 1e-9, f"identify: c = {c} (names {j['names']})"
 print(f"identify --plugin-path: c = {c[0]:.12g} (true 0.7)")
 PY
-rmse() { awk -F, 'NR > 1 && $2 == "test" && $4 == "LLS-prior" {print $5}' "$1/results.csv"; }
-with=$(rmse "$work/with") without=$(rmse "$work/without")
+with=$(rmse "$work/with/results.csv" test LLS-prior) without=$(rmse "$work/without/results.csv" test LLS-prior)
 echo "LLS-prior test RMSE: with the plugin declared $with, without $without"
 awk -v w="$with" -v wo="$without" 'BEGIN {
   if (w == "" || wo == "") { print "missing rows in results.csv"; exit 1 }

@@ -2,20 +2,15 @@
 # Installs spml's development package into a temporary prefix, builds the out-of-tree
 # example learner (learners/examples/ridge) against it with its own CMake project, and runs
 # it through `spml check-plugin` and `spml bench`: its Toy interpolation RMSE must equal LLS's (lambda ~ 0).
-set -euo pipefail
-build_dir=$1 source_dir=$2 spml=$3
-work=$(mktemp -d)
-trap 'rm -rf "$work"' EXIT
-cmake --install "$build_dir" --component spml_dev --prefix "$work/prefix" >/dev/null
-cmake -S "$source_dir/learners/examples/ridge" -B "$work/ridge" -DCMAKE_PREFIX_PATH="$work/prefix" >/dev/null
-cmake --build "$work/ridge" >/dev/null
+source "$(dirname "$0")/out_of_tree_common.sh" "$@"
+build_example learners/examples/ridge ridge
 # The contract suite first: the example keeps every promise of the learner ABI.
 "$spml" check-plugin "$work/ridge/ridge_learner.so"
 "$spml" generate --scenario toy --out "$work/toy.h5" --quiet
 "$spml" bench --data "$work/toy.h5" --out "$work/bench" --learner-path "$work/ridge/ridge_learner.so" \
   --learners Ridge,LLS,Ridge-GP --reps 1 2>/dev/null
-rmse() { awk -F, -v a="$1" '$2=="test_interp" && $4==a {print $5}' "$work/bench/results.csv"; }
-ridge=$(rmse Ridge) lls=$(rmse LLS) ridge_gp=$(rmse Ridge-GP)
+r="$work/bench/results.csv"
+ridge=$(rmse "$r" test_interp Ridge) lls=$(rmse "$r" test_interp LLS) ridge_gp=$(rmse "$r" test_interp Ridge-GP)
 echo "Ridge $ridge  LLS $lls  Ridge-GP $ridge_gp"
 awk -v r="$ridge" -v l="$lls" -v g="$ridge_gp" 'BEGIN {
   if (r == "" || l == "" || g == "") { print "missing rows in results.csv"; exit 1 }

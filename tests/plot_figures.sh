@@ -27,6 +27,17 @@ assert drawn > 0.02, f"{sys.argv[1]}: only {drawn:.1%} of the pixels drawn"
 PY
 done
 ls "$tmp/fig" | grep -q "tmp-" && { echo "temporary files left"; exit 1; }
+# Every figure's axes are labelled and its x data are what the label says (Toy: the input x,
+# SimDyn: time stamps in s, outputs named tau:jointK [N·m]); the diagnose figures too.
+"$spml" generate --scenario simdyn-ll --test-stride 10 --out "$tmp/simdyn.h5" --quiet > /dev/null
+"$spml" bench --data "$tmp/simdyn.h5" --out "$tmp/s" --learners LLS,LLS-prior --reps 1 --train-max 500 --test-max 1000 --quiet > /dev/null
+here=$(cd "$(dirname "$0")" && pwd)
+SPML_PUBLISHED="$here/../data/published" /usr/bin/python3 "$here/python/test_figures.py" "$here/../tools/plots" "$tmp/b" "$tmp/s"
+# A results.csv of schema 1 (spml before outputs were named) is still drawn, its outputs by index.
+cut -d, -f1-3,6- "$tmp/b/results.csv" | sed '1s/.*/scenario,split,output,algo,rmsemean,rmsestd,rmsemin,rmsemax,nllhmean,nllhstd,nllhmin,nllhmax,fits,fitsec,warnings/' \
+  | awk -F, 'BEGIN {OFS = ","} NR > 1 {$3 = 0} {print}' > "$tmp/v1.csv"
+"$spml" plot --results "$tmp/v1.csv" --out "$tmp/fig1" > "$tmp/list1"
+grep -q "table_toy_test_interp_0.png" "$tmp/list1" || { echo "schema-1 results not drawn"; cat "$tmp/list1"; exit 1; }
 # Bad input is named.
 echo "not,a,results,file" > "$tmp/bad.csv"
 if out=$("$spml" plot --results "$tmp/bad.csv" --out "$tmp/fig2" 2>&1); then echo "accepted a bad results.csv"; exit 1; fi

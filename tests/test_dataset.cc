@@ -282,3 +282,27 @@ TEST(Dataset, OutputThatIsAFolderIsNamedAsGiven) {
   EXPECT_EQ(error_of([&] { write_dataset(folder, small_dataset()); }), folder + ": is a directory; give a file name to write");
   for (const auto& e : std::filesystem::directory_iterator(dir)) EXPECT_EQ(e.path().filename(), "sub");
 }
+
+// --delimiter and --comment: a ';'-separated export with a '#' block above the header (and a
+// quoted name holding the delimiter), and a tab-separated log whose missing cell is named.
+TEST(Import, CsvDelimiterAndCommentLines) {
+  auto dir = test::temp_dir("csv-dialect");
+  std::ofstream((dir / "semi.csv").string()) << "# logger v2\n  # rate 1 kHz\nt;\"q;raw\";tau\n0;1.5;2\n# pause\n0.1; 2 ;4\n";
+  CsvDialect d;
+  d.delimiter = ';';
+  d.comment = "#";
+  const Table t = read_csv_table((dir / "semi.csv").string(), d);
+  ASSERT_EQ(t.names, (std::vector<std::string>{"t", "q;raw", "tau"}));
+  ASSERT_EQ(t.columns[2].size(), 2);
+  EXPECT_DOUBLE_EQ(t.columns[1][0], 1.5);
+  EXPECT_DOUBLE_EQ(t.columns[1][1], 2.0);
+  EXPECT_DOUBLE_EQ(t.columns[2][1], 4.0);
+  // without --comment the first '#' line is the header: refused naming the line that differs
+  EXPECT_NE(error_of([&] { read_csv_table((dir / "semi.csv").string(), CsvDialect{';', ""}); }).find("semi.csv:3: 3 fields, header has 1"),
+            std::string::npos);
+  std::ofstream((dir / "tab.csv").string()) << "t\tq\n0\t1\n0.1\t\n";
+  EXPECT_NE(error_of([&] { read_csv_table((dir / "tab.csv").string(), CsvDialect{'\t', ""}); }).find("tab.csv:3: column 'q': '' is not"),
+            std::string::npos);
+  EXPECT_NE(error_of([&] { read_csv_table((dir / "tab.csv").string(), CsvDialect{'"', ""}); }).find("delimiter cannot be a quote"),
+            std::string::npos);
+}

@@ -6,6 +6,8 @@
 #include <fstream>
 #include <functional>
 #include <map>
+#include <mutex>
+#include <nlohmann/json.hpp>
 #include <random>
 
 #include "spml/envs/mujoco_model.h"
@@ -260,6 +262,14 @@ TEST(Bench, SimDynLocalBandSpgpBeatsLls) {
   const double lls = res["test_interp/0/LLS"].rmse_mean, spgp = res["test_interp/0/SPGP"].rmse_mean;
   EXPECT_GT(lls, 30.0);           // the band is outside the model: paper 38.43
   EXPECT_LT(spgp, 0.7 * lls) << "SPGP " << spgp << " LLS " << lls;   // paper 19.07 vs 38.43
+  // results schema 2: outputs by the dataset's column names, with their unit
+  EXPECT_EQ(res["test_interp/2/LLS"].output_name, "tau:joint2");
+  EXPECT_EQ(res["test_interp/2/LLS"].unit, "N·m");
+  const MatrixFile p = read_matrix_file(o.out + "/predictions.h5");
+  EXPECT_EQ(p.attributes.at("format"), "spml-predictions/2");
+  EXPECT_EQ(p.attributes.at("outputs"), "tau:joint0,tau:joint1,tau:joint2");
+  EXPECT_EQ(p.attributes.at("units"), "N·m,N·m,N·m");
+  EXPECT_EQ(p.attributes.at("input_units").substr(0, 12), "rad,rad,rad,");
 }
 
 // All 5000 training rows (the staged fit: 1000-row subset, then 6 evaluations on all rows),
@@ -645,7 +655,7 @@ TEST(Bench, DataBeyondTheRangeOfSquaresIsRefused) {
 
 // A split or data file with a comma stays one field (RFC 4180 quotes) for compare and plot.
 TEST(Results, FieldsWithCommasAndQuotesRoundTrip) {
-  ResultRow row{"toy,v2", "test \"a,b\"", "LLS", 0, 1.5, 0, 1.5, 1.5, INFINITY, 0, INFINITY, INFINITY, 1, 0.25, "jitter 1e-9, retried"};
+  ResultRow row{"toy,v2", "test \"a,b\"", "LLS", 0, 1.5, 0, 1.5, 1.5, INFINITY, 0, INFINITY, INFINITY, 1, 0.25, "jitter 1e-9, retried", "", ""};
   const fs::path file = test::temp_dir("results-quotes") / "results.csv";
   std::ofstream(file) << results_header() << "\n" << results_line(row) << "\n";
   const auto back = read_results(file.string());
@@ -659,6 +669,146 @@ TEST(Results, FieldsWithCommasAndQuotesRoundTrip) {
   const auto py = test::run("/usr/bin/python3 -c \"import csv,sys; r=next(csv.DictReader(open(sys.argv[1]))); "
                             "print(r['scenario'] + '|' + r['split'] + '|' + r['rmsemean'])\" " + file.string());
   EXPECT_EQ(py.output, "toy,v2|test \"a,b\"|1.5\n");
+}
+
+// Schema 2 names each output and gives its unit; a schema-1 file (spml before the bump:
+// `output` the index, no `output_index`) is still read, its outputs shown by index.
+TEST(Results, SchemaTwoNamesOutputsAndSchemaOneIsStillRead) {
+  ResultRow row{"via-inst", "test", "LLS", 0, 4.5, 0, 4.5, 4.5, INFINITY, 0, INFINITY, INFINITY, 1, 0.25, "", "tau:link", "N·m"};
+  const fs::path dir = test::temp_dir("results-schema");
+  std::ofstream(dir / "v2.csv") << results_header() << "\n" << results_line(row) << "\n";
+  EXPECT_EQ(results_header().substr(0, 41), "scenario,split,output,output_index,unit,a");
+  const auto v2 = read_results((dir / "v2.csv").string());
+  ASSERT_EQ(v2.size(), 1u);
+  EXPECT_EQ(v2[0].output, 0);
+  EXPECT_EQ(v2[0].output_name, "tau:link");
+  EXPECT_EQ(output_label(v2[0]), "tau:link [N·m]");
+  std::ofstream(dir / "v1.csv") << "scenario,split,output,algo,rmsemean,rmsestd,rmsemin,rmsemax,nllhmean,nllhstd,nllhmin,nllhmax,"
+                                   "fits,fitsec,warnings\nvia-inst,test,0,LLS,4.5,0,4.5,4.5,inf,0,inf,inf,1,0.25,\n";
+  const auto v1 = read_results((dir / "v1.csv").string());
+  ASSERT_EQ(v1.size(), 1u);
+  EXPECT_EQ(v1[0].output, 0);
+  EXPECT_EQ(v1[0].output_name, "");
+  EXPECT_EQ(output_label(v1[0]), "output 0");
+  for (const char* f : {"v1.csv", "v2.csv"}) {
+    const auto r = test::run(test::spml_bin() + " compare --results " + (dir / f).string());
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    EXPECT_NE(r.output.find(std::string("== via-inst / test / ") + (f[1] == '1' ? "output 0" : "tau:link [N·m]") +
+                            "  (paper: vda_instant.csv)"), std::string::npos) << r.output;
+  }
+  EXPECT_EQ(column_unit("qd:joint1"), "rad/s");
+  EXPECT_EQ(column_unit("qdd:joint1"), "rad/s²");
+  EXPECT_EQ(column_unit("q:joint1"), "rad");
+  EXPECT_EQ(column_unit("force:carriage"), "N");
+  EXPECT_EQ(column_unit("y"), "");
+}
+
+// --set GP.key=value reaches only GP and wins over the unscoped value; a scope that is not a
+// learner of the run, or a key the scoped learner does not take, is a command-line error.
+TEST(Bench, SetScopedToOneLearner) {
+  LearnerConfig c;
+  c.values = {{"GP.max_evals", "30"}, {"max_evals", "100"}, {"SVR.C", "2"}};
+  const LearnerConfig gp = config_for(c, "GP"), spgp = config_for(c, "SPGP"), svr = config_for(c, "SVR");
+  EXPECT_EQ(gp.values, (std::vector<std::pair<std::string, std::string>>{{"max_evals", "30"}}));
+  EXPECT_EQ(spgp.values, (std::vector<std::pair<std::string, std::string>>{{"max_evals", "100"}}));
+  EXPECT_EQ(svr.values, (std::vector<std::pair<std::string, std::string>>{{"max_evals", "100"}, {"C", "2"}}));
+  EXPECT_NO_THROW(check_config(registry(), {"GP", "SVR", "SPGP"}, c));
+  auto error = [&](const std::vector<std::pair<std::string, std::string>>& values) {
+    LearnerConfig bad;
+    bad.values = values;
+    try {
+      check_config(registry(), {"LLS", "GP"}, bad);
+    } catch (const LearnerError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_EQ(error({{"SVR.C", "2"}}), "--set SVR.C=2: 'SVR' is not a learner of this run (LLS, GP)");
+  EXPECT_EQ(error({{"GP.C", "2"}}), "--set GP.C: GP does not accept the key 'C'");
+  EXPECT_EQ(error({{"LLS.max_evals", "2"}}), "--set LLS.max_evals: LLS does not accept the key 'max_evals'");
+  EXPECT_NE(error({{"GP.max_evals", "-3"}}).find("--set GP.max_evals=-3: GP: "), std::string::npos);
+  // the command line: exit 2 before anything is written; --quiet prints no progress
+  const fs::path dir = test::temp_dir("bench-set-scoped");
+  const std::string bench = test::spml_bin() + " bench --data " + scenario_file("toy") + " --learners LLS,GP --reps 1 --out ";
+  auto r = test::run(bench + (dir / "a").string() + " --set Nope.max_evals=3");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("'Nope' is not a learner of this run (LLS, GP)"), std::string::npos) << r.output;
+  r = test::run(bench + (dir / "a").string() + " --set max_eval=3");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_FALSE(fs::exists(dir / "a"));
+  r = test::run(bench + (dir / "b").string() + " --set GP.max_evals=20 --quiet");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_EQ(r.output.rfind("wrote ", 0), 0u) << r.output;   // the closing line only
+  EXPECT_EQ(r.output.find('\n'), r.output.size() - 1) << r.output;
+}
+
+// Progress: after the first unit the learners not timed yet are said to be estimated, a
+// learner's later units count at its own measured time, and a long fit sends heartbeats
+// (here every millisecond, so the Toy GP's fit has some).
+TEST(Bench, ProgressSaysWhatTheEtaRestsOnAndLongFitsBeat) {
+  BenchOptions o;
+  o.data = scenario_file("toy");
+  o.learners = {"LLS", "SVR", "GP"};
+  o.reps = 1;
+  o.heartbeat_seconds = 0.001;
+  o.out = (test::temp_dir("bench-progress") / "out").string();
+  std::vector<std::string> lines;
+  std::mutex m;
+  o.log = [&](const std::string& l) {
+    std::lock_guard<std::mutex> lock(m);
+    lines.push_back(l);
+  };
+  run_bench(registry(), o);
+  auto find = [&](const std::string& prefix, const std::string& part) {
+    for (const auto& l : lines)
+      if (l.rfind(prefix, 0) == 0 && l.find(part) != std::string::npos) return true;
+    return false;
+  };
+  EXPECT_TRUE(find("[1/3] LLS rep 1/1: ", "ETA ~0 s: 2 learner(s) not timed yet, counted as the slowest so far"));
+  EXPECT_TRUE(find("[2/3] SVR rep 1/1: ", "1 learner(s) not timed yet"));
+  EXPECT_TRUE(find("[3/3] GP rep 1/1: still fitting, ", ""));
+  EXPECT_FALSE(find("[3/3] GP rep 1/1: ", "ETA"));   // the last unit: elapsed only
+}
+
+// --json of learners, plugins and compare: one document each, what the text shows.
+TEST(Cli, JsonListsAndComparison) {
+  auto r = test::run(test::spml_bin() + " learners --json 2>/dev/null");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const auto learners = nlohmann::json::parse(r.output);
+  bool gp = false;
+  for (const auto& l : learners["learners"])
+    if (l["name"] == "GP") {
+      gp = true;
+      EXPECT_NE(std::find(l["flags"].begin(), l["flags"].end(), "variance"), l["flags"].end()) << l.dump();
+      bool max_evals = false;
+      for (const auto& k : l["config_keys"]) max_evals |= k["name"] == "max_evals" && k["default"] == "1000" && k["type"] == "integer";
+      EXPECT_TRUE(max_evals) << l.dump();
+    }
+  EXPECT_TRUE(gp) << r.output;
+  r = test::run(test::spml_bin() + " plugins --json 2>/dev/null");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const auto plugins = nlohmann::json::parse(r.output);
+  bool band = false;
+  for (const auto& p : plugins["plugins"])
+    if (p["name"] == "friction_band") {
+      band = p["linear"] == true && !p["shape_params"].empty() && p["shape_params"][0]["domain"] == "position_range";
+      EXPECT_TRUE(band) << p.dump();
+    }
+  EXPECT_TRUE(band) << r.output;
+  const fs::path dir = test::temp_dir("cli-json");
+  r = test::run(test::spml_bin() + " bench --quiet --data " + scenario_file("toy") + " --out " + (dir / "b").string() +
+                " --learners LLS,SVR,SVR-GP --reps 1");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = test::run(test::spml_bin() + " compare --json --results " + (dir / "b" / "results.csv").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const auto c = nlohmann::json::parse(r.output);
+  EXPECT_EQ(c["format"], "spml-compare/1");
+  ASSERT_EQ(c["groups"].size(), 2u);
+  EXPECT_EQ(c["groups"][0]["output"], "y");
+  EXPECT_EQ(c["groups"][0]["paper_table"], "toy_interp_w_noise.csv");
+  EXPECT_TRUE(c["groups"][0]["learners"][0]["nllh_mean"].is_null());   // LLS: no variance
+  EXPECT_NEAR(c["groups"][0]["learners"][0]["paper_rmse"].get<double>(), 1.29, 0.005);
+  EXPECT_EQ(c["tables"], 16);
 }
 
 TEST(Bench, MergeTakesEachUnitFromItsOwnShardAndRefusesAShardAsOutput) {

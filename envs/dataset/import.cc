@@ -66,13 +66,15 @@ Eigen::VectorXd resolve_column(const Table& table, const std::string& spec, std:
        (other.empty() ? "" : "; vectors of another length, not columns: " + other));
 }
 
-// The cells of one CSV line (RFC 4180 quoting: a cell in double quotes may hold commas, and
-// "" inside it is one quote); unquoted cells are trimmed of surrounding spaces.
-std::vector<std::string> csv_cells(const std::string& line, const std::string& where) {
+// The cells of one CSV line (RFC 4180 quoting: a cell in double quotes may hold the
+// delimiter, and "" inside it is one quote); unquoted cells are trimmed of surrounding blanks.
+std::vector<std::string> csv_cells(const std::string& line, char delim, const std::string& where) {
+  const char* blanks = delim == '\t' ? " " : " \t";
+  auto blank = [&](char c) { return c == ' ' || (c == '\t' && delim != '\t'); };
   std::vector<std::string> cells;
   size_t i = 0;
   while (true) {
-    while (i < line.size() && (line[i] == ' ' || line[i] == '\t')) ++i;
+    while (i < line.size() && blank(line[i])) ++i;
     std::string cell;
     if (i < line.size() && line[i] == '"') {
       for (++i;; ++i) {
@@ -82,18 +84,18 @@ std::vector<std::string> csv_cells(const std::string& line, const std::string& w
         else cell += line[i];
       }
       ++i;
-      while (i < line.size() && (line[i] == ' ' || line[i] == '\t')) ++i;
-      if (i < line.size() && line[i] != ',') fail(where + ": text after the closing quote of cell " + std::to_string(cells.size() + 1));
+      while (i < line.size() && blank(line[i])) ++i;
+      if (i < line.size() && line[i] != delim) fail(where + ": text after the closing quote of cell " + std::to_string(cells.size() + 1));
     } else {
-      const size_t comma = line.find(',', i);
-      cell = line.substr(i, comma == std::string::npos ? std::string::npos : comma - i);
-      const auto e = cell.find_last_not_of(" \t");
+      const size_t end = line.find(delim, i);
+      cell = line.substr(i, end == std::string::npos ? std::string::npos : end - i);
+      const auto e = cell.find_last_not_of(blanks);
       cell = e == std::string::npos ? "" : cell.substr(0, e + 1);
-      i = comma == std::string::npos ? line.size() : comma;
+      i = end == std::string::npos ? line.size() : end;
     }
     cells.push_back(std::move(cell));
     if (i >= line.size()) return cells;
-    ++i;   // the comma
+    ++i;   // the delimiter
   }
 }
 
@@ -105,7 +107,10 @@ int CsvText::column(const std::string& name) const {
   return -1;
 }
 
-CsvText read_csv(const std::string& path) {
+CsvText read_csv(const std::string& path, const CsvDialect& dialect) {
+  if (dialect.delimiter == '"' || dialect.delimiter == ' ' || dialect.delimiter == '\n' || dialect.delimiter == '\r' ||
+      dialect.delimiter == '\0')
+    fail(path + ": the delimiter cannot be a quote, a space, a newline or NUL");
   std::ifstream in(path, std::ios::binary);
   if (!in) fail(path + ": cannot open");
   std::string content((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
@@ -121,9 +126,11 @@ CsvText read_csv(const std::string& path) {
   while (std::getline(lines, line)) {
     ++lineno;
     if (!line.empty() && line.back() == '\r') line.pop_back();
-    if (line.find_first_not_of(" \t") == std::string::npos) continue;
+    const size_t first = line.find_first_not_of(" \t");
+    if (first == std::string::npos) continue;
+    if (!dialect.comment.empty() && line.compare(first, dialect.comment.size(), dialect.comment) == 0) continue;
     const std::string where = path + ":" + std::to_string(lineno);
-    auto cells = csv_cells(line, where);
+    auto cells = csv_cells(line, dialect.delimiter, where);
     if (t.header.empty()) {
       for (size_t i = 0; i < cells.size(); ++i) {
         if (cells[i].empty()) fail(where + ": header column " + std::to_string(i + 1) + " has no name");
@@ -142,8 +149,8 @@ CsvText read_csv(const std::string& path) {
   return t;
 }
 
-Table read_csv_table(const std::string& path) {
-  const CsvText csv = read_csv(path);
+Table read_csv_table(const std::string& path, const CsvDialect& dialect) {
+  const CsvText csv = read_csv(path, dialect);
   Table t;
   t.source = path;
   t.names = csv.header;

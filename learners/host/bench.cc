@@ -5,13 +5,17 @@
 #include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
+#include <limits>
 #include <map>
+#include <mutex>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <sstream>
+#include <thread>
 
 #include "spml/envs/parametric_model.h"
 #include "spml/learners/evaluate.h"
@@ -53,32 +57,96 @@ class Hasher {
 };
 
 constexpr const char* kManifestFormat = "spml-bench/3";
+constexpr const char* kPredictionsFormat = "spml-predictions/2";   // 2: root attributes `outputs`, `units`, `inputs`, `input_units`
 
-// "elapsed, ETA" after each fitted unit: the mean time of the units fitted so far times the
-// units of this run still to fit (units found done take no time and are not counted).
+std::string clock_text(double seconds) {
+  const long s = std::lround(seconds);
+  std::ostringstream out;
+  if (s >= 3600) out << s / 3600 << " h " << (s % 3600) / 60 << " min";
+  else if (s >= 60) out << s / 60 << " min " << s % 60 << " s";
+  else out << s << " s";
+  return out.str();
+}
+
+// "elapsed, ETA" after each fitted unit. A GP fit can take 10^4 times an LLS fit, so one mean
+// over all units misleads (it said 9 s for 47 s): each learner's units still to fit count at
+// the mean time of its own units (fitted in this run, or reused with the time stamped in
+// them); learners not timed yet as the slowest timed one (a GP after LLS and SVR), and the line says how many
+// that are, so the ETA is read as the rough figure it is.
 class Progress {
  public:
-  explicit Progress(int units) : left_(units), start_(std::chrono::steady_clock::now()) {}
-  void skip() { --left_; }
-  std::string done() {
-    --left_;
-    ++fitted_;
+  explicit Progress(std::map<std::string, int> units) : start_(std::chrono::steady_clock::now()) {
+    for (const auto& [name, n] : units) learners_[name].left = n;
+  }
+  void skip(const std::string& name, double seconds) { record(name, seconds); }
+  std::string done(const std::string& name, double seconds) {
+    record(name, seconds);
     const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
-    if (left_ <= 0) return "  (" + clock(elapsed) + " elapsed)";
-    return "  (" + clock(elapsed) + " elapsed, ETA " + clock(elapsed / fitted_ * left_) + ")";
+    double eta = 0, slowest = 0;
+    int untimed = 0, left = 0;
+    for (const auto& [n, l] : learners_)
+      if (l.fits > 0) slowest = std::max(slowest, l.seconds / l.fits);
+    for (const auto& [n, l] : learners_) {
+      left += l.left;
+      eta += l.left * (l.fits > 0 ? l.seconds / l.fits : slowest);
+      untimed += l.left > 0 && l.fits == 0;
+    }
+    if (left <= 0) return "  (" + clock_text(elapsed) + " elapsed)";
+    return "  (" + clock_text(elapsed) + " elapsed, ETA " + (untimed ? "~" : "") + clock_text(eta) +
+           (untimed ? ": " + std::to_string(untimed) + " learner(s) not timed yet, counted as the slowest so far" : "") + ")";
+  }
+  // The mean time of this learner's units so far; 0 when none is timed.
+  double expected(const std::string& name) const {
+    auto it = learners_.find(name);
+    return it == learners_.end() || it->second.fits == 0 ? 0.0 : it->second.seconds / it->second.fits;
   }
 
  private:
-  static std::string clock(double seconds) {
-    const long s = std::lround(seconds);
-    std::ostringstream out;
-    if (s >= 3600) out << s / 3600 << " h " << (s % 3600) / 60 << " min";
-    else if (s >= 60) out << s / 60 << " min " << s % 60 << " s";
-    else out << s << " s";
-    return out.str();
+  struct Learner {
+    int left = 0, fits = 0;
+    double seconds = 0;
+  };
+  void record(const std::string& name, double seconds) {
+    Learner& l = learners_[name];
+    --l.left;
+    if (std::isfinite(seconds) && seconds >= 0) {
+      l.seconds += seconds;
+      ++l.fits;
+    }
   }
-  int left_, fitted_ = 0;
+  std::map<std::string, Learner> learners_;
   std::chrono::steady_clock::time_point start_;
+};
+
+// A line every `every` seconds while one unit is being fitted, so a long fit (a GP on
+// thousands of rows) is not silent; stops when it goes out of scope.
+class Heartbeat {
+ public:
+  Heartbeat(double every, std::string tag, double expected, std::function<void(const std::string&)> log)
+      : thread_([=] {
+          if (!(every > 0) || !log) return;
+          const auto start = std::chrono::steady_clock::now();
+          std::unique_lock<std::mutex> lock(mutex_);
+          while (!cv_.wait_for(lock, std::chrono::duration<double>(every), [this] { return stop_; })) {
+            const double t = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+            log(tag + ": still fitting, " + clock_text(t) +
+                (expected > 0 ? " (its earlier units took " + clock_text(expected) + " each)" : ""));
+          }
+        }) {}
+  ~Heartbeat() {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      stop_ = true;
+    }
+    cv_.notify_all();
+    thread_.join();
+  }
+
+ private:
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  bool stop_ = false;
+  std::thread thread_;
 };
 
 // One split as the learners see it, its columns in the train split's order.
@@ -179,20 +247,53 @@ std::vector<Selected> select_learners(const LearnerRegistry& registry, const Ben
   return out;
 }
 
-// Every --set key must be understood by a selected learner, and its value must suit every
-// learner that takes it: checked before anything is fitted or written.
-void check_config(const LearnerRegistry& registry, const std::vector<Selected>& learners, const LearnerConfig& config) {
+}  // namespace
+
+// "GP.max_evals" -> {"GP", "max_evals"}; an unscoped key -> {"", key}.
+std::pair<std::string, std::string> scoped_key(const std::string& key) {
+  const auto dot = key.find('.');
+  if (dot == std::string::npos) return {"", key};
+  return {key.substr(0, dot), key.substr(dot + 1)};
+}
+
+LearnerConfig config_for(const LearnerConfig& config, const std::string& learner) {
+  LearnerConfig out;
+  out.seed = config.seed;
+  for (const auto& [k, v] : config.values)
+    if (scoped_key(k).first.empty()) out.values.emplace_back(k, v);
   for (const auto& [k, v] : config.values) {
+    const auto [scope, key] = scoped_key(k);
+    if (scope != learner) continue;
+    auto it = std::find_if(out.values.begin(), out.values.end(), [&](const auto& kv) { return kv.first == key; });
+    if (it != out.values.end()) it->second = v;   // the learner's own value wins over the shared one
+    else out.values.emplace_back(key, v);
+  }
+  return out;
+}
+
+// Every --set key must be understood by a selected learner (a scoped one by the learner it
+// names), and its value must suit every learner that takes it.
+void check_config(const LearnerRegistry& registry, const std::vector<std::string>& learners, const LearnerConfig& config) {
+  std::string names;
+  for (const auto& l : learners) names += (names.empty() ? "" : ", ") + l;
+  for (const auto& [k, v] : config.values) {
+    const auto [scope, key] = scoped_key(k);
+    if (!scope.empty() && std::find(learners.begin(), learners.end(), scope) == learners.end())
+      throw LearnerError("--set " + k + "=" + v + ": '" + scope + "' is not a learner of this run (" + names + ")");
     bool used = false;
     for (const auto& l : learners) {
-      if (!registry.config_keys(l.name).count(k)) continue;
+      if ((!scope.empty() && l != scope) || !registry.config_keys(l).count(key)) continue;
       used = true;
-      if (std::string why = registry.check_config(l.name, k, v); !why.empty())
-        throw LearnerError("--set " + k + "=" + v + ": " + l.name + ": " + why);
+      if (std::string why = registry.check_config(l, key, v); !why.empty())
+        throw LearnerError("--set " + k + "=" + v + ": " + l + ": " + why);
     }
-    if (!used) throw LearnerError("--set " + k + ": no selected learner accepts the key '" + k + "'");
+    if (!used)
+      throw LearnerError("--set " + k + ": " + (scope.empty() ? "no selected learner accepts" : scope + " does not accept") +
+                         " the key '" + key + "'");
   }
 }
+
+namespace {
 
 // The key of one unit: the data (every part, its columns, the regressor, the coefficients)
 // hashed once, plus what is particular to the unit.
@@ -317,6 +418,16 @@ std::optional<MatrixFile> read_unit(const std::string& path, const std::string& 
   return std::nullopt;
 }
 
+// Fit plus prediction time stamped in a unit (NaN when it holds none).
+double unit_seconds(const MatrixFile& u) {
+  double t = 0;
+  for (const char* k : {"fit_seconds", "predict_seconds"}) {
+    auto it = u.attributes.find(k);
+    t += it == u.attributes.end() ? std::numeric_limits<double>::quiet_NaN() : parse_number(it->second).value_or(NAN);
+  }
+  return t;
+}
+
 // Fits, predicts every test part, writes the unit atomically and returns it.
 MatrixFile fit_unit(Learner& learner, const std::vector<Part>& parts, const LearnerModel& lm, const LearnerConfig& config,
                     const std::string& key, const std::string& path, std::string* summary) {
@@ -352,8 +463,8 @@ MatrixFile fit_unit(Learner& learner, const std::vector<Part>& parts, const Lear
 
 // results.csv rows and predictions of one learner from its units (all repetitions present).
 void aggregate(const std::string& scenario, const std::string& name, bool deterministic, int reps,
-               const std::vector<MatrixFile>& units, const std::vector<Part>& parts, std::vector<ResultRow>& rows,
-               MatrixFile& predictions) {
+               const std::vector<MatrixFile>& units, const std::vector<Part>& parts, const std::vector<std::string>& outputs,
+               std::vector<ResultRow>& rows, MatrixFile& predictions) {
   double fitsec = 0;
   std::string warnings;
   for (const auto& u : units) {
@@ -384,7 +495,7 @@ void aggregate(const std::string& scenario, const std::string& name, bool determ
     for (size_t k = 0; k < rmse.size(); ++k) {
       const Summary a = summarize(rmse[k]), b = summarize(nllh[k]);
       rows.push_back({scenario, part.name, name, static_cast<int>(k), a.mean, a.std, a.min, a.max, b.mean, b.std, b.min,
-                      b.max, static_cast<int>(units.size()), fitsec, warnings});
+                      b.max, static_cast<int>(units.size()), fitsec, warnings, outputs[k], column_unit(outputs[k])});
     }
   }
 }
@@ -400,7 +511,9 @@ void BenchOptions::check() const {
   if (train_max < 0) throw LearnerError("--train-max " + std::to_string(train_max) + ": must be a whole number >= 1 or all (0)");
   if (test_max < 0) throw LearnerError("--test-max " + std::to_string(test_max) + ": must be a whole number >= 1 or all (0)");
   for (const auto& [k, v] : config.values)
-    if (k.empty()) throw LearnerError("--set =" + v + ": expected key=value");
+    if (k.empty() || k.back() == '.' || k.front() == '.') throw LearnerError("--set " + k + "=" + v + ": expected key=value or LEARNER.key=value");
+  if (!(heartbeat_seconds >= 0 && std::isfinite(heartbeat_seconds)))
+    throw LearnerError("heartbeat_seconds " + number_text(heartbeat_seconds) + ": must be a finite number >= 0");
 }
 
 BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bool all_requested) {
@@ -421,7 +534,11 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bo
 
   BenchReport report;
   const std::vector<Selected> learners = select_learners(registry, o, model.get(), model_problem, all_requested, report);
-  check_config(registry, learners, o.config);
+  {
+    std::vector<std::string> names;
+    for (const auto& l : learners) names.push_back(l.name);
+    check_config(registry, names, o.config);
+  }
 
   std::vector<Part> parts{make_part(train_split, train_split, o.train_max, model.get(), o.data)};
   for (const Split& s : ds.splits)
@@ -470,9 +587,19 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bo
 
   std::vector<ResultRow> rows;
   MatrixFile predictions;
-  predictions.attributes["format"] = "spml-predictions/1";
+  predictions.attributes["format"] = kPredictionsFormat;
   predictions.attributes["data"] = fs::absolute(o.data).string();
   predictions.attributes["scenario"] = scenario;
+  // The outputs by name and unit, in the column order of every y, mean and std (format 2).
+  auto listed = [](const std::vector<std::string>& columns, bool units) {
+    std::string text;
+    for (size_t i = 0; i < columns.size(); ++i) text += (i ? "," : "") + (units ? column_unit(columns[i]) : columns[i]);
+    return text;
+  };
+  predictions.attributes["outputs"] = listed(train_split.y_columns, false);
+  predictions.attributes["units"] = listed(train_split.y_columns, true);
+  predictions.attributes["inputs"] = listed(train_split.x_columns, false);
+  predictions.attributes["input_units"] = listed(train_split.x_columns, true);
   for (size_t pi = 1; pi < parts.size(); ++pi) {
     predictions.matrices[parts[pi].name + "/y"] = parts[pi].Y;
     RowMatrix idx(static_cast<Eigen::Index>(parts[pi].rows.size()), 1);
@@ -482,11 +609,16 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bo
 
   // Units in run order; unit u belongs to shard u % shards + 1.
   int total_units = 0, mine = 0;
-  for (const auto& l : learners) total_units += (l.flags & SPML_LEARNER_DETERMINISTIC) ? 1 : o.reps;
-  for (int u = 0; u < total_units; ++u) mine += u % o.shards == o.shard - 1;
+  std::map<std::string, int> plan;   // units of each learner in this shard
+  for (const auto& l : learners)
+    for (int rep = 0; rep < ((l.flags & SPML_LEARNER_DETERMINISTIC) ? 1 : o.reps); ++rep)
+      if (total_units++ % o.shards == o.shard - 1) {
+        ++mine;
+        ++plan[l.name];
+      }
   if (o.shards > 1) log("shard " + std::to_string(o.shard) + "/" + std::to_string(o.shards) + ": " + std::to_string(mine) +
                         " of " + std::to_string(total_units) + " units");
-  Progress progress(mine);
+  Progress progress(plan);
   int unit_number = -1;
   for (size_t li = 0; li < learners.size(); ++li) {
     const std::string& name = learners[li].name;
@@ -496,7 +628,7 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bo
     std::vector<MatrixFile> units;
     for (int rep = 0; rep < fits; ++rep) {
       const bool in_shard = ++unit_number % o.shards == o.shard - 1;
-      LearnerConfig config = o.config;
+      LearnerConfig config = config_for(o.config, name);
       config.seed = o.seed + static_cast<std::uint64_t>(rep);
       const std::string path = unit_path(o.out, name, rep);
       const std::string key = unit_key(dkey, registry, name, config, config.seed);
@@ -511,7 +643,7 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bo
         if (source != path) copy_unit(source, path);
         ++report.units_cached;
         if (in_shard) {
-          progress.skip();
+          progress.skip(name, unit_seconds(*u));
           log(tag.str() + ": done earlier");
         }
         units.push_back(std::move(*u));
@@ -528,10 +660,13 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bo
           std::to_string(parts[0].rows.size()) + " rows ...");
       try {
         std::string summary;
-        units.push_back(fit_unit(*learner, parts, lm, config, key, path, &summary));
+        {
+          const Heartbeat beat(o.heartbeat_seconds, tag.str(), progress.expected(name), o.log);
+          units.push_back(fit_unit(*learner, parts, lm, config, key, path, &summary));
+        }
         ++report.units_run;
         log(tag.str() + ": " + summary + (learner->notes().empty() ? "" : "  [" + learner->notes() + "]") +
-            progress.done());
+            progress.done(name, unit_seconds(units.back())));
       } catch (const std::exception& e) {
         report.failed.push_back(name + ": " + e.what());
         log(tag.str() + ": FAILED: " + e.what());
@@ -539,7 +674,8 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bo
         break;
       }
     }
-    if (static_cast<int>(units.size()) == fits) aggregate(scenario, name, deterministic, o.reps, units, parts, rows, predictions);
+    if (static_cast<int>(units.size()) == fits)
+      aggregate(scenario, name, deterministic, o.reps, units, parts, train_split.y_columns, rows, predictions);
   }
 
   // predictions.h5 first: when it cannot be written (a full disk), no results.csv claims the run.

@@ -7,6 +7,7 @@
 #include <iomanip>
 #include <limits>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <sstream>
 #include <stdexcept>
 
@@ -146,83 +147,157 @@ double kendall_tau(const std::vector<double>& a, const std::vector<double>& b) {
   return pairs > 0 ? (concordant - discordant) / pairs : kNaN;
 }
 
-std::string compare_report(const std::vector<ResultRow>& results, const std::string& published_dir) {
-  // Which paper table belongs to which of our groups.
-  std::map<std::string, std::string> table_of;
-  {
-    const CsvText index = read_csv((fs::path(published_dir) / "tables.csv").string());
-    if (index.header.size() < 4) throw DatasetError(index.source + ": expected columns scenario,split,output,table");
-    for (const auto& r : index.rows) table_of[r[0] + "|" + r[1] + "|" + r[2]] = r[3];
+namespace {
+
+// One (scenario, split, output) group of our rows with the paper's table for it: what both
+// the printed report and --json show, worked out once.
+struct Group {
+  std::vector<const ResultRow*> rows;
+  std::string table;                          // the paper's table file, "" when it has none
+  std::map<std::string, ResultRow> paper;
+  std::vector<std::string> paper_order, common;
+  std::vector<double> ours_rmse, paper_rmse;  // over `common`
+  double paper_value(const std::string& algo, bool rmse) const {
+    auto p = paper.find(algo);
+    return p == paper.end() ? kNaN : rmse ? p->second.rmse_mean : p->second.nllh_mean;
   }
+  bool ran(const std::string& algo) const {
+    for (const ResultRow* r : rows)
+      if (r->algo == algo) return true;
+    return false;
+  }
+  std::string best(const std::vector<double>& v) const {
+    return common[static_cast<size_t>(std::min_element(v.begin(), v.end()) - v.begin())];
+  }
+};
+
+struct Comparison {
+  std::map<std::string, std::string> table_of;   // "scenario|split|output" -> table file
+  std::vector<Group> groups;
+  std::map<std::string, TableScore> scores;      // by table file
+};
+
+Comparison compare(const std::vector<ResultRow>& results, const std::string& published_dir) {
+  Comparison c;
+  const CsvText index = read_csv((fs::path(published_dir) / "tables.csv").string());
+  if (index.header.size() < 4) throw DatasetError(index.source + ": expected columns scenario,split,output,table");
+  for (const auto& r : index.rows) c.table_of[r[0] + "|" + r[1] + "|" + r[2]] = r[3];
   std::vector<std::string> order;
-  std::map<std::string, std::vector<const ResultRow*>> groups;
+  std::map<std::string, std::vector<const ResultRow*>> by_key;
   for (const auto& r : results) {
     const std::string key = r.scenario + "|" + r.split + "|" + std::to_string(r.output);
-    if (!groups.count(key)) order.push_back(key);
-    groups[key].push_back(&r);
+    if (!by_key.count(key)) order.push_back(key);
+    by_key[key].push_back(&r);
   }
-  std::ostringstream out;
-  std::map<std::string, TableScore> scores;   // by table file
   for (const auto& key : order) {
-    const auto& rows = groups[key];
-    const ResultRow& first = *rows.front();
-    out << "\n== " << first.scenario << " / " << first.split << " / output " << first.output;
-    auto t = table_of.find(key);
-    std::map<std::string, ResultRow> paper;
-    std::vector<std::string> paper_order;
-    if (t == table_of.end()) {
-      out << "  (the paper has no table for this)\n";
-    } else {
-      out << "  (paper: " << t->second << ")\n";
-      for (auto& p : read_published_table((fs::path(published_dir) / t->second).string())) {
-        paper_order.push_back(p.algo);
-        paper[p.algo] = p;
+    Group g;
+    g.rows = by_key[key];
+    if (auto t = c.table_of.find(key); t != c.table_of.end()) {
+      g.table = t->second;
+      for (auto& p : read_published_table((fs::path(published_dir) / g.table).string())) {
+        g.paper_order.push_back(p.algo);
+        g.paper[p.algo] = p;
       }
+      c.scores[g.table] = score_table(g.rows, g.paper);
     }
-    out << std::left << std::setw(18) << "algo" << std::right << std::setw(16) << "RMSE ours" << std::setw(9) << "paper"
-        << std::setw(9) << "delta" << std::setw(16) << "NLLH ours" << std::setw(9) << "paper" << std::setw(9)
-        << "delta" << "\n";
-    std::vector<double> ours_rmse, paper_rmse;
-    std::vector<std::string> common;
-    for (const ResultRow* r : rows) {
-      auto p = paper.find(r->algo);
-      const double pr = p != paper.end() ? p->second.rmse_mean : kNaN;
-      const double pn = p != paper.end() ? p->second.nllh_mean : kNaN;
-      out << std::left << std::setw(18) << r->algo << std::right << std::setw(16)
-          << (num(r->rmse_mean) + "+-" + num(r->rmse_std)) << std::setw(9) << num(pr) << std::setw(9)
-          << delta(r->rmse_mean, pr) << std::setw(16) << num(r->nllh_mean) << std::setw(9) << num(pn)
-          << std::setw(9) << delta(r->nllh_mean, pn) << (r->warnings.empty() ? "" : "  !") << "\n";
-      if (p != paper.end()) {
-        ours_rmse.push_back(r->rmse_mean);
-        paper_rmse.push_back(pr);
-        common.push_back(r->algo);
+    for (const ResultRow* r : g.rows)
+      if (g.paper.count(r->algo)) {
+        g.ours_rmse.push_back(r->rmse_mean);
+        g.paper_rmse.push_back(g.paper_value(r->algo, true));
+        g.common.push_back(r->algo);
       }
-    }
-    for (const auto& a : paper_order) {
-      bool ran = false;
-      for (const ResultRow* r : rows) ran |= r->algo == a;
-      if (!ran) out << std::left << std::setw(18) << a << std::right << std::setw(16) << "(not run)" << std::setw(9)
-                    << num(paper[a].rmse_mean) << "\n";
-    }
-    if (t != table_of.end()) scores[t->second] = score_table(rows, paper);
-    if (common.size() >= 3) {
-      auto best = [&](const std::vector<double>& v) {
-        return common[static_cast<size_t>(std::min_element(v.begin(), v.end()) - v.begin())];
-      };
-      out << "rank agreement over " << common.size() << " learners (RMSE): Spearman rho " << num(spearman_rho(ours_rmse, paper_rmse))
-          << ", Kendall tau " << num(kendall_tau(ours_rmse, paper_rmse)) << "; best: ours " << best(ours_rmse)
-          << ", paper " << best(paper_rmse) << "\n";
-    }
-    bool any_warning = false;
-    for (const ResultRow* r : rows) any_warning |= !r->warnings.empty();
-    if (any_warning) {
-      out << "! warnings:\n";
-      for (const ResultRow* r : rows)
-        if (!r->warnings.empty()) out << "  " << r->algo << ": " << r->warnings << "\n";
-    }
+    c.groups.push_back(std::move(g));
   }
-  out << scoreboard(table_of, scores);
+  return c;
+}
+
+void print_group(std::ostream& out, const Group& g) {
+  const ResultRow& first = *g.rows.front();
+  out << "\n== " << first.scenario << " / " << first.split << " / " << output_label(first);
+  out << (g.table.empty() ? "  (the paper has no table for this)\n" : "  (paper: " + g.table + ")\n");
+  out << std::left << std::setw(18) << "algo" << std::right << std::setw(16) << "RMSE ours" << std::setw(9) << "paper"
+      << std::setw(9) << "delta" << std::setw(16) << "NLLH ours" << std::setw(9) << "paper" << std::setw(9) << "delta" << "\n";
+  for (const ResultRow* r : g.rows) {
+    const double pr = g.paper_value(r->algo, true), pn = g.paper_value(r->algo, false);
+    out << std::left << std::setw(18) << r->algo << std::right << std::setw(16) << (num(r->rmse_mean) + "+-" + num(r->rmse_std))
+        << std::setw(9) << num(pr) << std::setw(9) << delta(r->rmse_mean, pr) << std::setw(16) << num(r->nllh_mean)
+        << std::setw(9) << num(pn) << std::setw(9) << delta(r->nllh_mean, pn) << (r->warnings.empty() ? "" : "  !") << "\n";
+  }
+  for (const auto& a : g.paper_order)
+    if (!g.ran(a))
+      out << std::left << std::setw(18) << a << std::right << std::setw(16) << "(not run)" << std::setw(9) << num(g.paper_value(a, true)) << "\n";
+  if (g.common.size() >= 3)
+    out << "rank agreement over " << g.common.size() << " learners (RMSE): Spearman rho " << num(spearman_rho(g.ours_rmse, g.paper_rmse))
+        << ", Kendall tau " << num(kendall_tau(g.ours_rmse, g.paper_rmse)) << "; best: ours " << g.best(g.ours_rmse)
+        << ", paper " << g.best(g.paper_rmse) << "\n";
+  bool any_warning = false;
+  for (const ResultRow* r : g.rows) any_warning |= !r->warnings.empty();
+  if (any_warning) {
+    out << "! warnings:\n";
+    for (const ResultRow* r : g.rows)
+      if (!r->warnings.empty()) out << "  " << r->algo << ": " << r->warnings << "\n";
+  }
+}
+
+// A number for JSON: null where it is not finite (NLLH without a variance, a value the paper omits).
+nlohmann::json value(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); }
+
+nlohmann::json group_json(const Group& g) {
+  const ResultRow& first = *g.rows.front();
+  nlohmann::json j{{"scenario", first.scenario}, {"split", first.split},
+                   {"output", first.output_name.empty() ? nlohmann::json() : nlohmann::json(first.output_name)},
+                   {"output_index", first.output}, {"unit", first.unit},
+                   {"paper_table", g.table.empty() ? nlohmann::json() : nlohmann::json(g.table)}};
+  for (const ResultRow* r : g.rows)
+    j["learners"].push_back({{"algo", r->algo}, {"rmse_mean", value(r->rmse_mean)}, {"rmse_std", value(r->rmse_std)},
+                             {"nllh_mean", value(r->nllh_mean)}, {"nllh_std", value(r->nllh_std)},
+                             {"paper_rmse", value(g.paper_value(r->algo, true))}, {"paper_nllh", value(g.paper_value(r->algo, false))},
+                             {"fits", r->fits}, {"fit_seconds", value(r->fit_seconds)}, {"warnings", r->warnings}});
+  j["not_run"] = nlohmann::json::array();
+  for (const auto& a : g.paper_order)
+    if (!g.ran(a)) j["not_run"].push_back({{"algo", a}, {"paper_rmse", value(g.paper_value(a, true))}});
+  if (g.common.size() >= 3)
+    j["rank_agreement"] = {{"learners", g.common.size()}, {"spearman_rho", value(spearman_rho(g.ours_rmse, g.paper_rmse))},
+                           {"kendall_tau", value(kendall_tau(g.ours_rmse, g.paper_rmse))},
+                           {"best_ours", g.best(g.ours_rmse)}, {"best_paper", g.best(g.paper_rmse)}};
+  return j;
+}
+
+}  // namespace
+
+std::string compare_report(const std::vector<ResultRow>& results, const std::string& published_dir) {
+  const Comparison c = compare(results, published_dir);
+  std::ostringstream out;
+  for (const Group& g : c.groups) print_group(out, g);
+  out << scoreboard(c.table_of, c.scores);
   return out.str();
+}
+
+nlohmann::json compare_json(const std::vector<ResultRow>& results, const std::string& published_dir) {
+  const Comparison c = compare(results, published_dir);
+  nlohmann::json j{{"format", "spml-compare/1"}, {"groups", nlohmann::json::array()}, {"scoreboard", nlohmann::json::array()}};
+  for (const Group& g : c.groups) j["groups"].push_back(group_json(g));
+  int beats = 0;
+  std::vector<std::string> seen;
+  for (const auto& [key, file] : c.table_of) {
+    if (std::find(seen.begin(), seen.end(), file) != seen.end()) continue;
+    seen.push_back(file);
+    nlohmann::json row{{"table", file}, {"key", key}};
+    if (auto it = c.scores.find(file); it != c.scores.end()) {
+      const TableScore& s = it->second;
+      const bool win = std::isfinite(s.our_rmse) && s.our_rmse < s.paper_rmse;
+      beats += win;
+      row.update({{"ours_best", s.our_best}, {"ours_rmse", value(s.our_rmse)}, {"paper_best", s.paper_best},
+                  {"paper_rmse", value(s.paper_rmse)}, {"within_15_percent", s.within}, {"common", s.common},
+                  {"spearman_rho", value(s.rho)}, {"beats", win}});
+    } else {
+      row["run"] = false;
+    }
+    j["scoreboard"].push_back(row);
+  }
+  j["tables"] = seen.size();
+  j["beats"] = beats;
+  return j;
 }
 
 }  // namespace spml

@@ -12,9 +12,9 @@
 namespace spml {
 namespace {
 
-constexpr const char* kColumns[] = {"scenario", "split",   "output",  "algo",    "rmsemean", "rmsestd",
-                                    "rmsemin",  "rmsemax", "nllhmean", "nllhstd", "nllhmin",  "nllhmax",
-                                    "fits",     "fitsec",  "warnings"};
+constexpr const char* kColumns[] = {"scenario", "split",    "output",  "output_index", "unit",    "algo",
+                                    "rmsemean", "rmsestd",  "rmsemin", "rmsemax",      "nllhmean", "nllhstd",
+                                    "nllhmin",  "nllhmax",  "fits",    "fitsec",       "warnings"};
 
 // A text field of results.csv: one line (newlines become spaces), in double quotes when it
 // holds a comma or a quote (RFC 4180: a quote inside is doubled), so that a data file or split
@@ -54,6 +54,8 @@ std::vector<ResultRow> parse_rows(const std::string& path, bool published) {
     split = required({"split"});
     output = required({"output"});
   }
+  // Schema 2 names the output and gives its index in `output_index`; schema 1 has the index in `output`.
+  const int index = csv.column("output_index"), unit = csv.column("unit");
   const int fits = csv.column("fits"), fitsec = csv.column("fitsec"), warnings = csv.column("warnings");
   std::vector<ResultRow> out;
   for (size_t i = 0; i < csv.rows.size(); ++i) {
@@ -67,9 +69,12 @@ std::vector<ResultRow> parse_rows(const std::string& path, bool published) {
     if (!published) {
       row.scenario = r[scenario];
       row.split = r[split];
-      const auto o = parse_integer(r[output], 0, 1 << 30);
-      if (!o) throw DatasetError(line + " column 'output': '" + r[output] + "' is not a whole number >= 0");
+      const size_t ic = index >= 0 ? static_cast<size_t>(index) : output;
+      const auto o = parse_integer(r[ic], 0, 1 << 30);
+      if (!o) throw DatasetError(line + " column '" + csv.header[ic] + "': '" + r[ic] + "' is not a whole number >= 0");
       row.output = static_cast<int>(*o);
+      if (index >= 0) row.output_name = r[output];
+      if (unit >= 0) row.unit = r[static_cast<size_t>(unit)];
       if (fits >= 0) row.fits = static_cast<int>(number(r[static_cast<size_t>(fits)], line + " column 'fits'", false));
       if (fitsec >= 0) row.fit_seconds = number(r[static_cast<size_t>(fitsec)], line + " column 'fitsec'", false);
       if (warnings >= 0) row.warnings = r[static_cast<size_t>(warnings)];
@@ -92,7 +97,8 @@ std::string results_line(const ResultRow& r) {
   for (char& c : warnings)
     if (c == ',') c = ';';
   std::ostringstream s;
-  s << field(r.scenario) << "," << field(r.split) << "," << r.output << "," << field(r.algo) << "," << number_text(r.rmse_mean) << ","
+  s << field(r.scenario) << "," << field(r.split) << "," << field(r.output_name.empty() ? std::to_string(r.output) : r.output_name)
+    << "," << r.output << "," << field(r.unit) << "," << field(r.algo) << "," << number_text(r.rmse_mean) << ","
     << number_text(r.rmse_std) << "," << number_text(r.rmse_min) << "," << number_text(r.rmse_max) << "," << number_text(r.nllh_mean) << ","
     << number_text(r.nllh_std) << "," << number_text(r.nllh_min) << "," << number_text(r.nllh_max) << "," << r.fits << ","
     << number_text(r.fit_seconds) << "," << field(warnings);
@@ -101,6 +107,19 @@ std::string results_line(const ResultRow& r) {
 
 std::vector<ResultRow> read_results(const std::string& path) { return parse_rows(path, false); }
 std::vector<ResultRow> read_published_table(const std::string& path) { return parse_rows(path, true); }
+
+std::string column_unit(const std::string& column) {
+  static const std::pair<const char*, const char*> kPrefixes[] = {
+      {"tau:", "N·m"}, {"force:", "N"}, {"qdd:", "rad/s²"}, {"qd:", "rad/s"}, {"q:", "rad"}};
+  for (const auto& [prefix, unit] : kPrefixes)
+    if (column.rfind(prefix, 0) == 0) return unit;
+  return column == "t" ? "s" : "";
+}
+
+std::string output_label(const ResultRow& row) {
+  if (row.output_name.empty()) return "output " + std::to_string(row.output);
+  return row.unit.empty() ? row.output_name : row.output_name + " [" + row.unit + "]";
+}
 
 std::string canonical_algo(const std::string& name) {
   if (name == "SPGP-from-zeroes") return "SPGP-from-zeros";

@@ -280,7 +280,7 @@ class ModelsIdentifyDiagnose(unittest.TestCase):
         self.assertAlmostEqual(first["shape"]["lower"], 0.15, delta=0.005)
         self.assertAlmostEqual(first["shape"]["upper"], 0.25, delta=0.005)
         self.assertLess(report["final"]["rel_error_test_all"], 0.5 * report["baseline"]["rel_error_test_all"])
-        with self.assertRaisesRegex(ValueError, "min_gain=2"):
+        with self.assertRaisesRegex(ValueError, "min_gain = 2: must be a finite number in \\[0, 1\\]"):
             spml.diagnose(ARM, self.gl, min_gain=2.0)
 
 

@@ -1,6 +1,8 @@
 // spml bench / spml compare / spml learners: run learners on a dataset, print the results
 // beside the paper's tables, list what is installed.
+#include <cmath>
 #include <iostream>
+#include <nlohmann/json.hpp>
 
 #include "commands.h"
 #include "spml/learners/compare.h"
@@ -17,6 +19,27 @@ void load_learners(LearnerRegistry& registry, const std::vector<std::string>& ex
 }
 
 const char* kPathHelp = "Extra learner library or folder (also $SPML_LEARNER_PATH, ':'-separated)";
+
+// One key of a learner's or force plugin's table, for --json (bounds null where unbounded).
+nlohmann::json key_json(const spml_config_key& k) {
+  static const char* types[] = {"unknown", "number", "integer", "numbers", "text"};
+  auto bound = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); };
+  return {{"name", k.name}, {"type", types[k.type >= 1 && k.type <= 4 ? k.type : 0]}, {"min", bound(k.min)},
+          {"max", bound(k.max)}, {"default", k.default_value ? nlohmann::json(k.default_value) : nlohmann::json()},
+          {"help", k.help ? k.help : ""}};
+}
+
+nlohmann::json learner_flags(std::uint32_t f) {
+  static const std::pair<std::uint32_t, const char*> names[] = {
+      {SPML_LEARNER_USES_MODEL, "uses_model"},       {SPML_LEARNER_VARIANCE, "variance"},
+      {SPML_LEARNER_PARAMETRIC, "parametric"},       {SPML_LEARNER_NONPARAMETRIC, "nonparametric"},
+      {SPML_LEARNER_DETERMINISTIC, "deterministic"}, {SPML_LEARNER_NEEDS_PRIOR, "needs_prior"},
+      {SPML_LEARNER_NEEDS_TRUTH, "needs_truth"}};
+  nlohmann::json out = nlohmann::json::array();
+  for (const auto& [bit, name] : names)
+    if (f & bit) out.push_back(name);
+  return out;
+}
 
 }  // namespace
 
@@ -42,7 +65,15 @@ void add_bench(CLI::App& app) {
   cmd->add_option("--reps", *reps, "Repetitions with seeds seed..seed+reps-1")->capture_default_str()->check(CLI::Range(1, 1000));
   cmd->add_option("--seed", *seed, "Seed of the first repetition")->capture_default_str();
   cmd->add_option("--learner-path", *paths, kPathHelp);
-  cmd->add_option("--set", *sets, "key=value for every learner that accepts the key (e.g. max_evals=200)");
+  cmd->add_option("--set", *sets,
+                  "key=value for every learner that accepts the key (e.g. max_evals=200), or LEARNER.key=value for "
+                  "one learner of the run (e.g. GP.max_evals=200; it wins over an unscoped value)");
+  auto quiet = std::make_shared<bool>(false);
+  cmd->add_flag("--quiet,-q", *quiet, "No progress output (errors and the closing line only)");
+  auto heartbeat = std::make_shared<double>(15);
+  cmd->add_option("--heartbeat", *heartbeat, "Seconds between 'still fitting' lines during one long fit (0: none)")
+      ->capture_default_str()
+      ->check(finite_number(0, 1e6));
   cmd->add_option("--train-max", *train_max, "Use at most this many training rows, evenly strided, or 'all'")
       ->capture_default_str();
   cmd->add_option("--test-max", *test_max, "Score at most this many rows per test split, evenly strided, or 'all'")
@@ -75,9 +106,16 @@ void add_bench(CLI::App& app) {
     LearnerRegistry registry;
     load_learners(registry, *paths);
     o.learners = registry.expand(*learners);
-    o.log = [](const std::string& line) { std::cerr << line << std::endl; };
+    try {
+      check_config(registry, o.learners, o.config);   // a typo in --set is a command-line error
+    } catch (const LearnerError& e) {
+      throw CLI::ValidationError(e.what());
+    }
+    if (!*quiet) o.log = [](const std::string& line) { std::cerr << line << std::endl; };
+    o.heartbeat_seconds = *heartbeat;
     const BenchReport r = run_bench(registry, o, *learners == "all");
-    for (const auto& s : r.skipped) std::cerr << "skipped " << s << "\n";
+    if (!*quiet)
+      for (const auto& s : r.skipped) std::cerr << "skipped " << s << "\n";
     std::cout << "wrote " << *out << "/results.csv and " << *out << "/predictions.h5 (" << r.units_run << " fits run, "
               << r.units_cached << " reused";
     if (o.shards > 1)
@@ -118,13 +156,16 @@ void add_compare(CLI::App& app) {
   auto published = std::make_shared<std::string>(default_published_dir());
   cmd->add_option("--results", *results, "results.csv from spml bench (repeatable)")->required();
   cmd->add_option("--published", *published, "Folder of the paper's tables")->capture_default_str();
+  auto json = std::make_shared<bool>(false);
+  cmd->add_flag("--json", *json, "Print one JSON document (format spml-compare/1) instead of the tables");
   cmd->callback([=] {
     std::vector<ResultRow> rows;
     for (const auto& f : *results) {
       auto r = read_results(f);
       rows.insert(rows.end(), r.begin(), r.end());
     }
-    std::cout << compare_report(rows, *published);
+    if (*json) std::cout << compare_json(rows, *published).dump(2) << "\n";
+    else std::cout << compare_report(rows, *published);
   });
 }
 
@@ -132,9 +173,23 @@ void add_learners(CLI::App& app) {
   auto* cmd = app.add_subcommand("learners", "List the learners found on the search path");
   auto paths = std::make_shared<std::vector<std::string>>();
   cmd->add_option("--learner-path", *paths, kPathHelp);
+  auto json = std::make_shared<bool>(false);
+  cmd->add_flag("--json", *json, "Print one JSON document: every learner with its flags and key table");
   cmd->callback([=] {
     LearnerRegistry registry;
     load_learners(registry, *paths);
+    if (*json) {
+      nlohmann::json list = nlohmann::json::array();
+      for (const auto& n : registry.plugin_names()) {
+        const spml_learner* l = registry.plugin(n);
+        nlohmann::json keys = nlohmann::json::array();
+        for (const spml_config_key* k = l->config_keys; k && k->name; ++k) keys.push_back(key_json(*k));
+        list.push_back({{"name", n}, {"summary", l->summary ? l->summary : ""}, {"file", registry.plugin_file(n)},
+                        {"flags", learner_flags(l->flags)}, {"config_keys", keys}});
+      }
+      std::cout << nlohmann::json{{"learners", list}, {"compositions", {"A-B", "it-A-B"}}}.dump(2) << "\n";
+      return;
+    }
     for (const auto& n : registry.plugin_names()) {
       const spml_learner* l = registry.plugin(n);
       std::cout << n << "\t" << l->summary << "\t[" << registry.plugin_file(n) << "]\n";
@@ -147,10 +202,29 @@ void add_plugins(CLI::App& app) {
   auto* cmd = app.add_subcommand("plugins", "List the force plugins found, with their keys and shape parameters");
   auto paths = std::make_shared<std::vector<std::string>>();
   cmd->add_option("--plugin-path", *paths, "Extra force-plugin library or folder (also $SPML_PLUGIN_PATH)");
+  auto json = std::make_shared<bool>(false);
+  cmd->add_flag("--json", *json, "Print one JSON document: every plugin with its keys and shape parameters");
   cmd->callback([=] {
     add_plugin_paths(*paths);
     const PluginCatalog& catalog = force_plugins();
     for (const auto& w : catalog.warnings()) std::cerr << "spml: warning: " << w << "\n";
+    if (*json) {
+      static const char* domains[] = {"absolute", "position_range", "top_speed"};
+      nlohmann::json list = nlohmann::json::array();
+      for (const auto& n : catalog.names()) {
+        const auto* p = static_cast<const spml_force_plugin*>(catalog.find(n));
+        nlohmann::json keys = nlohmann::json::array(), shapes = nlohmann::json::array();
+        for (const spml_config_key* k = p->config_keys; k && k->name; ++k) keys.push_back(key_json(*k));
+        for (const spml_shape_param* sp = p->shape_params; sp && sp->key; ++sp)
+          shapes.push_back({{"key", sp->key}, {"lo", sp->lo}, {"hi", sp->hi},
+                            {"domain", domains[sp->domain == SPML_SHAPE_POSITION ? 1 : sp->domain == SPML_SHAPE_SPEED ? 2 : 0]},
+                            {"log_scale", static_cast<bool>(sp->log_scale)}, {"integer", static_cast<bool>(sp->integer)}});
+        list.push_back({{"name", n}, {"summary", p->summary ? p->summary : ""}, {"file", catalog.file_of(n)},
+                        {"linear", p->regressor != nullptr}, {"config_keys", keys}, {"shape_params", shapes}});
+      }
+      std::cout << nlohmann::json{{"plugins", list}}.dump(2) << "\n";
+      return;
+    }
     for (const auto& n : catalog.names()) {
       const auto* p = static_cast<const spml_force_plugin*>(catalog.find(n));
       std::cout << n << "\t" << p->summary << "\t[" << catalog.file_of(n) << "]\n";

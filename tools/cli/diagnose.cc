@@ -3,12 +3,55 @@
 #include <filesystem>
 #include <iostream>
 
+#include <fstream>
+#include <unistd.h>
+
 #include "commands.h"
 #include "spml/diagnose.h"
+#include "spml/envs/mujoco_model.h"
 #include "spml/force_effects.h"
 #include "spml/plugin_loader.h"
 
 namespace spml::cli {
+namespace {
+
+// True when the file's first element is <robot> (a URDF): comments, the <?xml?> declaration
+// and a doctype before it are skipped.
+bool is_urdf(const std::string& path) {
+  std::ifstream in(path);
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  for (size_t i = text.find('<'); i != std::string::npos; i = text.find('<', i + 1)) {
+    if (text.compare(i, 4, "<!--") == 0) {
+      i = text.find("-->", i);
+      if (i == std::string::npos) return false;
+      continue;
+    }
+    if (text.compare(i, 2, "<?") == 0 || text.compare(i, 2, "<!") == 0) continue;
+    return text.compare(i, 6, "<robot") == 0 && (i + 6 >= text.size() || !std::isalnum(static_cast<unsigned char>(text[i + 6])));
+  }
+  return false;
+}
+
+// A URDF is read by MuJoCo's own loader, as `regressor` and `identify` read it, and saved as
+// the MJCF it compiles to, OUT/<stem>.from-urdf.xml (written atomically); diagnose works on
+// that file, and extended.xml extends it. An MJCF is used as given.
+std::string mjcf_of(const std::string& model, const std::string& out) {
+  if (!std::filesystem::exists(model) || !is_urdf(model)) return model;
+  const ModelPtr m = load_mjcf(model);
+  std::filesystem::create_directories(out);
+  const std::string mjcf = (std::filesystem::path(out) / (std::filesystem::path(model).stem().string() + ".from-urdf.xml")).string();
+  const std::string tmp = mjcf + ".tmp-" + std::to_string(::getpid());
+  char error[1000] = {0};
+  if (!mj_saveLastXML(tmp.c_str(), m.get(), error, sizeof error)) {
+    std::filesystem::remove(tmp);
+    throw std::runtime_error(model + ": MuJoCo read the URDF but could not save it as MJCF (" + mjcf + "): " + error);
+  }
+  std::filesystem::rename(tmp, mjcf);
+  std::cerr << "read the URDF " << model << " with MuJoCo's loader; diagnosing the MJCF it compiles to, " << mjcf << "\n";
+  return mjcf;
+}
+
+}  // namespace
 
 void add_diagnose(CLI::App& app) {
   auto* cmd = app.add_subcommand("diagnose", "Name what a model gets wrong on measured data, write the extended MJCF, measure the gain");
@@ -16,7 +59,7 @@ void add_diagnose(CLI::App& app) {
   auto out = std::make_shared<std::string>();
   auto paths = std::make_shared<std::vector<std::string>>();
   auto no_plots = std::make_shared<bool>(false);
-  cmd->add_option("--model,-m", o->model, "MJCF of the robot (hinge/slide joints)")->required();
+  cmd->add_option("--model,-m", o->model, "MJCF or URDF of the robot (hinge/slide joints)")->required();
   cmd->add_option("--data,-d", o->data, "spml/1 dataset with q:/qd:/qdd:<joint> inputs and tau:<joint> targets")->required();
   cmd->add_option("--fit-split", o->fit_split, "split the causes are fitted on")->capture_default_str();
   cmd->add_option("--test-split", o->test_split,
@@ -43,6 +86,7 @@ void add_diagnose(CLI::App& app) {
     add_plugin_paths(*paths);
     for (const auto& w : force_plugins().warnings()) std::cerr << "spml: warning: " << w << "\n";
     o->check();
+    o->model = mjcf_of(o->model, *out);
     auto plots = [&](const std::string& staged) {
       if (*no_plots) return;
       const std::string script = (std::filesystem::path(spml_share_dir()) / "plots" / "diagnose_plots.py").string();

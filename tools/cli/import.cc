@@ -15,6 +15,8 @@ void add_import(CLI::App& app) {
     ImportSpec spec;
     std::vector<std::string> splits, text;
     std::string lowpass = "0", order = "4", drop = "0", decimate = "1";
+    std::string delimiter = ",";
+    CsvDialect dialect;
   };
   auto a = std::make_shared<Args>();
   cmd->add_option("INPUT", a->input, "CSV or .mat file (or none, with --text)");
@@ -33,6 +35,8 @@ void add_import(CLI::App& app) {
   cmd->add_option("--t", a->spec.t, "time column [s]");
   cmd->add_option("--split", a->splits, "NAME:BEGIN:END in rows or percent, e.g. train:0:64% test:64%: (default: all rows as 'train')");
   cmd->add_option("--format", a->format, "input format")->check(CLI::IsMember({"auto", "csv", "mat"}));
+  cmd->add_option("--delimiter", a->delimiter, "CSV cell delimiter: one character, or 'tab' (default ',')");
+  cmd->add_option("--comment", a->dialect.comment, "CSV lines starting with this text are skipped (e.g. '#'; default: none)");
   cmd->callback([a] {
     namespace fs = std::filesystem;
     std::vector<std::string> inputs;
@@ -57,7 +61,15 @@ void add_import(CLI::App& app) {
     c.decimate = static_cast<int>(*decimate);
     std::string fmt = a->format;
     if (fmt == "auto") fmt = std::filesystem::path(a->input).extension() == ".mat" ? "mat" : "csv";
-    Table table = !a->text.empty() ? read_text_logs(a->text) : fmt == "mat" ? read_mat_table(a->input) : read_csv_table(a->input);
+    const std::string d = a->delimiter == "tab" || a->delimiter == "\\t" ? "\t" : a->delimiter;
+    if (d.size() != 1 || d[0] == '"' || d[0] == ' ' || d[0] == '\n' || d[0] == '\r')
+      throw CLI::ValidationError("--delimiter", "'" + a->delimiter + "' is not one character other than a quote, space or newline (or 'tab')");
+    if (a->dialect.comment.find_first_of(" \t\n\r") != std::string::npos)
+      throw CLI::ValidationError("--comment", "'" + a->dialect.comment + "' holds a blank or newline");
+    a->dialect.delimiter = d[0];
+    if ((a->delimiter != "," || !a->dialect.comment.empty()) && (fmt != "csv" || !a->text.empty()))
+      throw CLI::ValidationError("--delimiter", "--delimiter and --comment apply to CSV input only");
+    Table table = !a->text.empty() ? read_text_logs(a->text) : fmt == "mat" ? read_mat_table(a->input) : read_csv_table(a->input, a->dialect);
     for (const auto& s : a->splits) a->spec.splits.push_back(parse_split_range(s));
     a->spec.x = expand_names(join_list(a->spec.x));   // q:joint{1..7} -> q:joint1, ..., q:joint7
     a->spec.y = expand_names(join_list(a->spec.y));

@@ -33,8 +33,11 @@ void add_plot(CLI::App& app) {
     for (const auto& f : *results) read_results(f);   // throws naming the file and line
     for (const auto& f : *predictions) {
       const MatrixFile p = read_matrix_file(f);
-      if (!p.attributes.count("format") || p.attributes.at("format") != "spml-predictions/1")
-        throw std::runtime_error(f + ": not an spml bench predictions.h5 (attribute format != spml-predictions/1)");
+      // Format 1 (outputs by index) is still drawn, with "output K" for a name and no units.
+      const std::string format = p.attributes.count("format") ? p.attributes.at("format") : "";
+      if (format != "spml-predictions/1" && format != "spml-predictions/2")
+        throw std::runtime_error(f + ": not an spml bench predictions.h5 (attribute format is neither spml-predictions/2 "
+                                     "nor spml-predictions/1)");
     }
     const std::string script = (std::filesystem::path(spml_share_dir()) / "plots" / "bench_plots.py").string();
     std::string command = "/usr/bin/python3 " + shell_quote(script) + " --out " + shell_quote(*out) + " --published " +

@@ -1,13 +1,135 @@
 #!/usr/bin/python3
-"""Plots of a `spml diagnose` output folder: residuals against time before/after, and the
-measured states, per joint. Reads DIR/series.csv (written by diagnose), writes DIR/plots/*.png."""
+"""Plots of a `spml diagnose` output folder, per joint, written to DIR/plots/*.png:
+  residuals.png  torque residual (measured - model) against time on the test split, model as
+                 given and extended; long records are drawn as the min..max envelope of each of
+                 at most 800 time bins (a 50 s log at 1 kHz is 50 000 points: drawn one by one
+                 the two models hide each other) with the bin's RMS as a line
+  states.png     measured positions and velocities
+  rollouts.png   (when report.json has rollouts) open-loop rollouts under the measured torques:
+                 the position error at the end of the horizon, model as given and extended
+Reads DIR/series.csv and DIR/report.json (written by diagnose). Units come from each joint's
+type in the model file report.json names (hinge: N·m, rad; slide/prismatic: N, m)."""
 import csv
+import json
+import math
 import os
 import sys
+import textwrap
+import xml.etree.ElementTree as ET
 
 import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+MAX_BINS = 800
+HINGE = {"torque": "N·m", "position": "rad", "velocity": "rad/s"}
+SLIDE = {"torque": "N", "position": "m", "velocity": "m/s"}
+
+
+def joint_units(model_path, joints):
+    """{joint: HINGE or SLIDE} from the MJCF's `type` (default hinge) or a URDF's `prismatic`.
+    A model that cannot be read gives hinge units."""
+    units = {j: HINGE for j in joints}
+    try:
+        root = ET.parse(model_path).getroot()
+    except (OSError, ET.ParseError, TypeError):
+        return units
+    for el in root.iter("joint"):
+        name, kind = el.get("name"), el.get("type", "hinge")
+        if name in units and kind in ("slide", "prismatic"):
+            units[name] = SLIDE
+    return units
+
+
+def envelope(t, v, bins=MAX_BINS):
+    """(bin centres, min, max, rms) of v over at most `bins` equal-count bins of t; the samples
+    themselves when there are fewer."""
+    t, v = np.asarray(t), np.asarray(v)
+    if len(t) <= bins:
+        return t, v, v, np.abs(v)
+    edges = np.linspace(0, len(t), bins + 1).astype(int)
+    parts = [(t[a:b].mean(), v[a:b].min(), v[a:b].max(), np.sqrt(np.mean(v[a:b] ** 2)))
+             for a, b in zip(edges[:-1], edges[1:]) if b > a]
+    return tuple(np.array(c) for c in zip(*parts))
+
+
+def residual_figure(t, test, col, joints, units, out):
+    fig, axes = plt.subplots(len(joints), 1, figsize=(10, 1.9 * len(joints) + 1.2), sharex=True, squeeze=False)
+    binned = len(t) > MAX_BINS
+    for ax, j in zip(axes[:, 0], joints):
+        tau = np.array([float(r[col["tau:" + j]]) for r in test])
+        for key, color, name in (("given", "tab:red", "model as given"), ("final", "tab:blue", "extended model")):
+            res = tau - np.array([float(r[col[key + ":" + j]]) for r in test])
+            tc, lo, hi, rms = envelope(t, res)
+            if binned:
+                ax.fill_between(tc, lo, hi, color=color, alpha=0.3, lw=0, label=f"{name}: min..max per bin")
+                ax.plot(tc, rms, color=color, lw=0.8, label=f"{name}: RMS per bin")
+            else:
+                ax.plot(tc, lo, color=color, lw=0.7, label=name)
+        ax.axhline(0, color="black", lw=0.5)
+        ax.set_ylabel(f"{j} [{units[j]['torque']}]", fontsize=8)
+        ax.grid(alpha=0.3)
+    how = f" (each of {MAX_BINS} bins of {len(t) / MAX_BINS:.0f} samples)" if binned else ""
+    axes[0, 0].set_title("\n".join(textwrap.wrap("torque residual (measured − model) on the test split" + how, 70)),
+                         fontsize=10)
+    axes[0, 0].legend(loc="upper right", fontsize=7, ncol=2)
+    axes[-1, 0].set_xlabel("t [s]")
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "residuals.png"), dpi=110)
+    plt.close(fig)
+
+
+def states_figure(t, test, col, joints, units, out):
+    fig, axes = plt.subplots(len(joints), 2, figsize=(10, 1.9 * len(joints) + 1.2), sharex=True, squeeze=False)
+    for row, j in zip(axes, joints):
+        row[0].plot(t, [float(r[col["q:" + j]]) for r in test], lw=0.7)
+        row[1].plot(t, [float(r[col["qd:" + j]]) for r in test], lw=0.7, color="tab:green")
+        row[0].set_ylabel(f"q:{j} [{units[j]['position']}]", fontsize=8)
+        row[1].set_ylabel(f"qd:{j} [{units[j]['velocity']}]", fontsize=8)
+        for ax in row:
+            ax.grid(alpha=0.3)
+    axes[0, 0].set_title("measured positions, test split", fontsize=10)
+    axes[0, 1].set_title("velocities, test split", fontsize=10)
+    axes[-1, 0].set_xlabel("t [s]")
+    axes[-1, 1].set_xlabel("t [s]")
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "states.png"), dpi=110)
+    plt.close(fig)
+
+
+def rollout_figure(report, units, out):
+    """Position error at the end of the open-loop rollouts, per joint, before and after."""
+    ro = report.get("rollout", {})
+    before, after = ro.get("position_error_before"), ro.get("position_error_after")
+    if not before or not after:
+        return False
+    joints = list(before)
+    kinds = {units.get(j, HINGE)["position"] for j in joints}
+    unit = kinds.pop() if len(kinds) == 1 else "rad or m (per joint type)"
+    x = np.arange(len(joints))
+    fig, ax = plt.subplots(figsize=(max(6, 0.9 * len(joints) + 3), 4))
+    for shift, errors, color, name in ((-0.2, before, "tab:red", "model as given"), (0.2, after, "tab:blue", "extended model")):
+        # a rollout that diverged has an infinite error (null in report.json): no bar, a mark
+        values = [float(errors[j]) if errors.get(j) is not None else math.inf for j in joints]
+        finite = [v if math.isfinite(v) else 0.0 for v in values]
+        ax.bar(x + shift, finite, 0.4, color=color, label=name)
+        for k, v in enumerate(values):
+            if not math.isfinite(v):
+                ax.annotate("diverged", (x[k] + shift, 0), rotation=90, ha="center", va="bottom", fontsize=7)
+    ax.set_xticks(x)
+    ax.set_xticklabels(joints, rotation=30 if len(joints) > 4 else 0, ha="right" if len(joints) > 4 else "center")
+    ax.set_xlabel("joint")
+    ax.set_ylabel(f"position error at {ro.get('horizon_s', 0):g} s [{unit}]")
+    ax.set_title("\n".join(textwrap.wrap(
+        f"open-loop rollouts under the measured torques: {ro.get('windows', '?')} windows of "
+        f"{ro.get('horizon_s', 0):g} s on '{ro.get('split', '?')}' (mean over windows of the |error| at the end)", 60)), fontsize=10)
+    ax.legend(fontsize=8)
+    ax.grid(axis="y", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "rollouts.png"), dpi=110)
+    plt.close(fig)
+    return True
 
 
 def main(folder):
@@ -17,37 +139,17 @@ def main(folder):
     col = {name: i for i, name in enumerate(head)}
     joints = [name[4:] for name in head if name.startswith("tau:")]
     test = [r for r in body if r[0] == "test"]
-    t = [float(r[col["t"]]) for r in test]
+    t = np.array([float(r[col["t"]]) for r in test])
+    report = {}
+    if os.path.exists(os.path.join(folder, "report.json")):
+        with open(os.path.join(folder, "report.json")) as f:
+            report = json.load(f)
+    units = joint_units(report.get("model"), joints)
     out = os.path.join(folder, "plots")
     os.makedirs(out, exist_ok=True)
-
-    fig, axes = plt.subplots(len(joints), 1, figsize=(10, 1.8 * len(joints) + 1), sharex=True, squeeze=False)
-    for ax, j in zip(axes[:, 0], joints):
-        tau = [float(r[col["tau:" + j]]) for r in test]
-        given = [a - float(r[col["given:" + j]]) for a, r in zip(tau, test)]
-        final = [a - float(r[col["final:" + j]]) for a, r in zip(tau, test)]
-        ax.plot(t, given, lw=0.7, color="tab:red", label="model as given")
-        ax.plot(t, final, lw=0.7, color="tab:blue", label="extended model")
-        ax.set_ylabel(j)
-        ax.grid(alpha=0.3)
-    axes[0, 0].set_title("torque residual (measured - model), test split")
-    axes[0, 0].legend(loc="upper right", fontsize=8)
-    axes[-1, 0].set_xlabel("t [s]")
-    fig.tight_layout()
-    fig.savefig(os.path.join(out, "residuals.png"), dpi=90)
-    plt.close(fig)
-
-    fig, axes = plt.subplots(len(joints), 2, figsize=(10, 1.8 * len(joints) + 1), sharex=True, squeeze=False)
-    for row, j in zip(axes, joints):
-        row[0].plot(t, [float(r[col["q:" + j]]) for r in test], lw=0.7)
-        row[1].plot(t, [float(r[col["qd:" + j]]) for r in test], lw=0.7, color="tab:green")
-        row[0].set_ylabel("q " + j)
-        row[1].set_ylabel("qd " + j)
-    axes[-1, 0].set_xlabel("t [s]")
-    axes[-1, 1].set_xlabel("t [s]")
-    fig.tight_layout()
-    fig.savefig(os.path.join(out, "states.png"), dpi=90)
-    plt.close(fig)
+    residual_figure(t, test, col, joints, units, out)
+    states_figure(t, test, col, joints, units, out)
+    rollout_figure(report, units, out)
 
 
 if __name__ == "__main__":

@@ -8,22 +8,14 @@
 namespace spml::py {
 namespace {
 
-// The bounds `spml diagnose` puts on its options, so a value the command line refuses is
-// refused here too (the library takes the numbers as given).
-void check_range(const char* name, double v, double lo, double hi) {
-  if (!(v >= lo && v <= hi))
-    throw BadArgument("diagnose: " + std::string(name) + "=" + std::to_string(v) + " is outside [" + std::to_string(lo) + ", " +
-                      std::to_string(hi) + "]");
-}
-
+// The library's own check of the options (the command line calls the same one), as a
+// ValueError: a value `spml diagnose` refuses is refused here with the same words.
 void check(const DiagnoseOptions& o) {
-  check_range("holdout", o.holdout, 0.05, 0.9);
-  check_range("bic_threshold", o.bic_threshold, 0, 1e9);
-  check_range("min_gain", o.min_gain, 0, 1);
-  check_range("max_causes", o.max_causes, 1, 1000);
-  check_range("still_speed", o.still_speed, 0, 1e9);
-  check_range("rollout_seconds", o.rollout_seconds, 1e-3, 10);
-  check_range("rollouts", o.rollouts, 0, 10000);
+  try {
+    o.check();
+  } catch (const std::invalid_argument& e) {
+    throw BadArgument(std::string("diagnose: ") + e.what());
+  }
 }
 
 pb::object run(const std::string& model, const std::string& data, const std::string& out, const DiagnoseOptions& settings,

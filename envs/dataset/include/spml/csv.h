@@ -15,11 +15,17 @@ struct CsvText {
   int column(const std::string& name) const;   // index or -1
 };
 
+// How cells are separated, and which lines are comments.
+struct CsvDialect {
+  char delimiter = ',';    // ',' ';' '\t' '|' ... (a quote, a newline or a space is refused)
+  std::string comment;     // a line whose first non-blank text starts with this is skipped ("": none)
+};
+
 // Throws DatasetError naming the file and line: not a text file (NUL bytes, an HDF5 or
 // other binary file), no header, an empty or repeated header name, a row of another width.
-// Blank lines are skipped; cells are trimmed of surrounding spaces; a cell in double quotes
-// may hold commas ("" is one quote, RFC 4180); a UTF-8 byte order mark before the header is
-// dropped.
-CsvText read_csv(const std::string& path);
+// Blank lines and comment lines are skipped; cells are trimmed of surrounding spaces (and
+// tabs, unless the tab is the delimiter); a cell in double quotes may hold the delimiter (""
+// is one quote, RFC 4180); a UTF-8 byte order mark before the header is dropped.
+CsvText read_csv(const std::string& path, const CsvDialect& dialect = {});
 
 }  // namespace spml

@@ -1,6 +1,8 @@
 // Turning foreign tables (CSV with a header row, MATLAB .mat files) into spml/1 datasets.
 #pragma once
 
+#include "spml/csv.h"
+
 #include <string>
 #include <vector>
 
@@ -18,7 +20,7 @@ struct Table {
   Eigen::Index rows() const { return columns.empty() ? 0 : columns.front().size(); }
 };
 
-Table read_csv_table(const std::string& path);
+Table read_csv_table(const std::string& path, const CsvDialect& dialect = {});
 Table read_mat_table(const std::string& path);
 // Text logs of whitespace-separated numbers, each holding len(names) consecutive values per
 // sample (e.g. 7 joint positions): "FILE=NAMES" with NAMES comma-separated, "{a..b}"

@@ -35,6 +35,9 @@ struct BenchOptions {
   Eigen::Index train_max = 0;       // 0: all training rows; else an even stride down to at most this
   Eigen::Index test_max = 5000;     // likewise per test split (0: all)
   std::function<void(const std::string&)> log;   // progress lines; may be empty
+  // While one unit fits longer than this, a line every this many seconds ("still fitting");
+  // 0: none. Called from a second thread while the fit runs.
+  double heartbeat_seconds = 15;
   // Sharding: the (learner, repetition) units are numbered in run order and this run fits
   // only those with number % shards == shard - 1; units of other shards are used when
   // already present in out/units and left alone otherwise.
@@ -64,6 +67,15 @@ struct BenchReport {
 // anything is fitted or written. results.csv and predictions.h5 are rewritten atomically
 // from the finished units.
 BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& options, bool all_requested = false);
+
+// --set keys: `key` goes to every learner that accepts it, `LEARNER.key` (e.g. `GP.max_evals`)
+// only to that learner of the run (as named in the learner list, compositions included) and
+// wins over an unscoped value of the same key. config_for() is what one learner receives.
+LearnerConfig config_for(const LearnerConfig& config, const std::string& learner);
+// Throws LearnerError naming the entry: a scope that is not one of `learners`, a key no
+// learner in scope accepts, a value outside a key's table. run_bench() calls it; `spml bench`
+// calls it first, so these are command-line errors (exit 2).
+void check_config(const LearnerRegistry& registry, const std::vector<std::string>& learners, const LearnerConfig& config);
 
 // Builds in `out` what one unsharded `spml bench` would have written, from the shard folders
 // of one sharded run: checks that their bench.json agree (data, settings, learners), copies

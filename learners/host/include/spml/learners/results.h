@@ -1,8 +1,11 @@
 // results.csv, the public table `spml bench` writes and `spml compare` reads: the schema is
-// defined here once.
+// defined here once. Schema 2 (written):
 //
-//   scenario,split,output,algo,rmsemean,rmsestd,rmsemin,rmsemax,nllhmean,nllhstd,nllhmin,nllhmax,fits,fitsec,warnings
+//   scenario,split,output,output_index,unit,algo,rmsemean,rmsestd,rmsemin,rmsemax,nllhmean,nllhstd,nllhmin,nllhmax,fits,fitsec,warnings
 //
+// `output` is the dataset's Y column name (`tau:joint0`), `output_index` its position, `unit`
+// the unit of RMSE (from the name's prefix, see column_unit; empty when unknown). Schema 1
+// (no `output_index` column; `output` the index) is still read: its rows get no name or unit.
 // One row per (scenario, test split, output, learner); statistics over the repetitions (std
 // with ddof = 0); NLLH "inf" for learners without a variance; `fits` how many fits were made
 // (1 for a deterministic learner), `fitsec` the mean fit time, `warnings` the learners'
@@ -23,6 +26,7 @@ struct ResultRow {
   int fits = 0;
   double fit_seconds = 0;
   std::string warnings;
+  std::string output_name, unit;   // schema 2; empty when read from schema 1
 };
 
 // The header line, without the newline.
@@ -33,6 +37,12 @@ std::string results_line(const ResultRow& row);
 std::vector<ResultRow> read_results(const std::string& path);
 // Reads one of the paper's tables (algo,rmsemean,...; "-" = not given, "inf").
 std::vector<ResultRow> read_published_table(const std::string& path);
+
+// The unit of a dataset column, from its name's prefix: `tau:` N·m, `force:` N, `q:` rad,
+// `qd:` rad/s, `qdd:` rad/s², `t` s; "" for any other name (Toy's `y`, user features).
+std::string column_unit(const std::string& column);
+// "tau:joint0 [N·m]", "y", or "output 2" for a schema-1 row.
+std::string output_label(const ResultRow& row);
 
 // Paper spellings that differ from ours ("SPGP-from-zeroes").
 std::string canonical_algo(const std::string& name);
