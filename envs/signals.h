@@ -4,20 +4,13 @@
 #include <Eigen/Core>
 #include <cmath>
 
+#include "spml/signal.h"
+
 namespace spml::signals {
 
-// Velocity and acceleration by a central difference applied twice (NumPy's `gradient`
-// recipe): qd_k = (q_{k+1} - q_{k-1}) / 2h, qdd_k = (qd_{k+1} - qd_{k-1}) / 2h. Unbiased for
-// smooth signals; white position noise of std s becomes s*sqrt(6)/(4h^2) on qdd. The first
-// and last `kEdge` rows lack a full stencil and are left at zero (callers drop them).
+// Rows at each end of a twice-differentiated signal without a full central-difference stencil
+// (spml/signal.h central_difference, applied twice): the scenario generators drop them.
 constexpr int kEdge = 2;
-inline void central_differences(const Eigen::MatrixXd& q, double h, Eigen::MatrixXd& qd, Eigen::MatrixXd& qdd) {
-  const Eigen::Index n = q.rows();
-  qd = Eigen::MatrixXd::Zero(n, q.cols());
-  qdd = Eigen::MatrixXd::Zero(n, q.cols());
-  for (Eigen::Index k = 1; k + 1 < n; ++k) qd.row(k) = (q.row(k + 1) - q.row(k - 1)) / (2 * h);
-  for (Eigen::Index k = 2; k + 2 < n; ++k) qdd.row(k) = (qd.row(k + 1) - qd.row(k - 1)) / (2 * h);
-}
 
 // Mean of each block of `factor` rows: a boxcar anti-alias filter plus decimation.
 inline Eigen::MatrixXd block_average(const Eigen::MatrixXd& x, int factor) {

@@ -83,8 +83,11 @@ Rollout simulate(const mjModel* sim, ForceEffects& effects, const mjModel* prior
     if (options.progress && k % 20000 == 0) options.progress(stage, static_cast<double>(k) / n);
   }
   Rollout r;
-  Eigen::MatrixXd qd, qdd;
-  signals::central_differences(qm, h, qd, qdd);
+  Eigen::MatrixXd qd(qm.rows(), qm.cols()), qdd(qm.rows(), qm.cols());
+  for (Eigen::Index j = 0; j < qm.cols(); ++j) {
+    qd.col(j) = central_difference(qm.col(j), h);
+    qdd.col(j) = central_difference(qd.col(j), h);
+  }
   // Drop the edge samples that have no full difference stencil.
   const int e = signals::kEdge;
   r.q = qm.middleRows(e, steps);

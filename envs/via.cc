@@ -70,8 +70,7 @@ Dataset generate_via(bool autoregressive, const GenerateOptions& options) {
   }
   effects.detach();
 
-  Eigen::MatrixXd rate, unused;
-  signals::central_differences(defl, 1.0 / kRecordRate, rate, unused);
+  const Eigen::MatrixXd rate = central_difference(defl.col(0), 1.0 / kRecordRate);
   // Drop the undifferentiable edges, then average blocks of 10 (1 kHz -> 100 Hz).
   const int e = signals::kEdge, kept = records - 2 * e;
   Eigen::MatrixXd raw(kept, 3);

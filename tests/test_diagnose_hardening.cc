@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 
 #include <fstream>
+#include <map>
 #include <regex>
 #include <sstream>
 #include <string>
@@ -53,6 +54,32 @@ bool names_cause(const nlohmann::json& rep, const std::string& effect, const std
 }
 
 }  // namespace
+
+// MJCF frictionloss is a soft constraint in MuJoCo: near zero speed its force is below the level
+// (the regressor's fl*sign(qd) was off by up to fl there: 5.6 N m RMS for |qd| < 3e-3 rad/s).
+// diagnose predicts MuJoCo's own constraint friction for the model as given, so data simulated
+// from a model with frictionloss fit it down to the noise floor of the same run without it:
+// the arm with frictionloss 5 on joint1 against the plain arm, same seed, noise and excitation
+// (measured: joint1 0.959 % against 0.955 %; with ideal Coulomb before, 2.44 %, and on exact
+// 1 kHz data a Stribeck cause invented). Tolerance 1.25x the floor.
+TEST(DiagnoseHardening, FrictionlossDataFitTheNoiseFloorAndInventNoCause) {
+  std::map<std::string, nlohmann::json> rep;
+  for (const std::string fl : {"", "5"}) {
+    const auto dir = spml::test::temp_dir("diagnose-frictionloss" + fl);
+    std::string arm = read_text(std::string(SPML_SOURCE_DIR) + "/mjcf/planar_arm3.xml");
+    if (!fl.empty()) arm = std::regex_replace(arm, std::regex("name=\"joint1\""), "name=\"joint1\" frictionloss=\"" + fl + "\"");
+    std::ofstream(dir / "arm.xml") << arm;
+    const auto g = run(spml::test::spml_bin() + " generate --model '" + (dir / "arm.xml").string() +
+                       "' --duration 8 --rate 500 --seed 3 --derive --out '" + (dir / "d.h5").string() + "' 2>&1");
+    ASSERT_EQ(g.exit_code, 0) << g.output;
+    rep[fl] = diagnose(dir, "");
+    std::filesystem::remove_all(dir);
+  }
+  const double floor = rep[""]["baseline"]["rel_error_test"]["joint1"], with = rep["5"]["baseline"]["rel_error_test"]["joint1"];
+  std::printf("joint1 relative error on test: %.4g %% with frictionloss 5, %.4g %% without\n", 100 * with, 100 * floor);
+  EXPECT_LT(with, 1.25 * floor);
+  EXPECT_TRUE(rep["5"]["causes"].empty()) << rep["5"]["causes"].dump(1);
+}
 
 TEST(DiagnoseHardening, ACandidateWithANanRegressorIsSkippedAndTheDiagnosisGoesOn) {
   const auto dir = spml::test::temp_dir("diagnose-nan-candidate");

@@ -402,7 +402,8 @@ void check_force_plugins(const std::string& file, Recorder& recorder) {
   const auto lib = load_library(file, force_plugin_kind(), recorder);
   if (!lib) return;
   const ModelPtr m = write_and_load_model(recorder.seed());
-  for (const void* e : lib->entries()) check_one(*static_cast<const spml_force_plugin*>(e), m.get(), recorder);
+  for (const void* e : lib->entries())
+    if (recorder.wanted(static_cast<const spml_force_plugin*>(e)->name)) check_one(*static_cast<const spml_force_plugin*>(e), m.get(), recorder);
 }
 
 }  // namespace spml::check

@@ -71,6 +71,13 @@ std::vector<std::pair<std::string, const spml_config_key*>> key_tables(const std
 
 }  // namespace
 
+std::vector<std::string> plugin_names(const std::string& file) {
+  std::shared_ptr<PluginLibrary> keep;
+  std::vector<std::string> out;
+  for (const auto& [name, table] : key_tables(file, &keep)) out.push_back(name);
+  return out;
+}
+
 std::string config_problem(const std::vector<std::string>& files, const std::vector<std::pair<std::string, std::string>>& config) {
   if (config.empty()) return "";
   std::vector<std::shared_ptr<PluginLibrary>> keep(files.size());

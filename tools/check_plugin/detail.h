@@ -27,6 +27,7 @@ class Recorder {
   void run(const std::string& plugin, const std::string& clause, const std::function<Outcome()>& body);
   void record(const std::string& plugin, const std::string& clause, Outcome outcome);
   std::uint64_t seed() const { return options_.seed; }
+  bool wanted(const std::string& plugin) const { return options_.only_plugin.empty() || options_.only_plugin == plugin; }
   // The --set values for keys of `table`; throws naming the key when a value does not suit it.
   std::vector<std::pair<std::string, std::string>> config_for(const spml_config_key* table) const;
 

@@ -50,6 +50,7 @@ void add_regressor(CLI::App& app) {
   cmd->callback([a] {
     add_plugin_paths(a->plugin_paths);
     MjcfRegressor reg(a->model, RegressorOptions{a->offsets});
+    warn_inverse_mismatches(reg, a->model);
     auto base = reg.base_parameters();
     warn_close_call(base);
     nlohmann::json j{{"model", a->model}, {"standard_parameters", reg.param_names().size()}, {"rank", base.rank},

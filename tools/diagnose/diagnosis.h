@@ -43,6 +43,7 @@ struct SplitData {
   std::unique_ptr<JointColumns> cols;
   BlockColumns base;
   Eigen::VectorXd b, given, y0;   // targets, prediction of the model as given, b - given
+  Eigen::VectorXd friction;       // MuJoCo's frictionloss torque - the regressor's fl*sign(qd), stacked (in given; empty: none)
   Eigen::Index N = 0;
   std::vector<Section> sos;       // the parallel filter on this split's time base (empty: none)
 };
@@ -102,6 +103,7 @@ class Diagnosis {
   void load_cross();
   void map_outputs();
   void note_frictionloss();
+  Eigen::VectorXd frictionloss_correction(const SplitData& d) const;
   // prepare.cc
   SplitData prepare(const Split& s);
   void plan_parallel_filter();

@@ -107,16 +107,50 @@ void Diagnosis::load_cross() {
 }
 
 // MuJoCo applies frictionloss as a soft constraint (a force up to the level, smaller near zero
-// speed); the regressor reads it as ideal Coulomb friction, level * sign(qd). Said, per joint.
+// speed); the model as given is scored with MuJoCo's own (frictionloss_correction). Said, per joint.
 void Diagnosis::note_frictionloss() {
   const mjModel* m = reg_->model();
   std::string joints;
   for (int j = 0; j < m->njnt; ++j)
     if (m->dof_frictionloss[m->jnt_dofadr[j]] != 0) joints += (joints.empty() ? "" : ", ") + reg_->joint_names()[static_cast<size_t>(j)];
   if (!joints.empty())
-    notes_.push_back("frictionloss on " + joints + ": MuJoCo applies it as a soft constraint, diagnose as ideal Coulomb friction "
-                     "(level * sign(qd)); near zero speed the two differ, so data simulated by MuJoCo from this model do not fit "
-                     "exactly there (the written model is scored by the same regressor)");
+    notes_.push_back("frictionloss on " + joints + ": MuJoCo applies it as a soft constraint (below the level near zero speed); the model "
+                     "as given and the written model are scored with MuJoCo's own friction force (mj_inverse at each row's q, qd, qdd), "
+                     "candidates and a re-identified level with ideal Coulomb columns (level * sign(qd)); that force depends on qdd "
+                     "near zero speed, so noisy accelerations leave more residual there");
+}
+
+// MuJoCo applies frictionloss as a soft constraint, the regressor as fl * sign(qd): at each
+// row, MuJoCo's own friction torque of the model as given (mj_inverse at the row's q, qd, qdd:
+// the friction rows of its constraint forces) minus the regressor's term, stacked like b. The
+// model as given then predicts what MuJoCo would, and the soft zone near zero speed is not
+// left in the residual for candidates to explain. Empty when the model has no frictionloss.
+Eigen::VectorXd Diagnosis::frictionloss_correction(const SplitData& s) const {
+  const mjModel* m = reg_->model();
+  bool any = false;
+  for (int v = 0; v < m->nv; ++v) any |= m->dof_frictionloss[v] != 0;
+  if (!any) return {};
+  const auto O = static_cast<Eigen::Index>(s.cols->output_dof.size());
+  Eigen::VectorXd out = Eigen::VectorXd::Zero(s.N * O);
+  DataPtr d = make_data(m);
+  std::vector<double> friction(static_cast<size_t>(m->nv));
+  for (Eigen::Index i = 0; i < s.N; ++i) {
+    for (int j = 0; j < m->njnt; ++j) {
+      d->qpos[m->jnt_qposadr[j]] = s.split.X(i, s.cols->q[static_cast<size_t>(j)]);
+      d->qvel[m->jnt_dofadr[j]] = s.split.X(i, s.cols->qd[static_cast<size_t>(j)]);
+      d->qacc[m->jnt_dofadr[j]] = s.split.X(i, s.cols->qdd[static_cast<size_t>(j)]);
+    }
+    mj_inverse(m, d.get());
+    std::fill(friction.begin(), friction.end(), 0.0);
+    for (int r = 0; r < d->nefc; ++r)
+      if (d->efc_type[r] == mjCNSTR_FRICTION_DOF) friction[static_cast<size_t>(d->efc_id[r])] += d->efc_force[r];
+    for (Eigen::Index o = 0; o < O; ++o) {
+      const int v = s.cols->output_dof[static_cast<size_t>(o)];
+      const double qd = d->qvel[v], ideal = m->dof_frictionloss[v] * (qd > 0 ? 1.0 : qd < 0 ? -1.0 : 0.0);
+      out[o * s.N + i] = -friction[static_cast<size_t>(v)] - ideal;   // tau_inverse holds -J'f
+    }
+  }
+  return out;
 }
 
 // Per output (Y column): the model joint it belongs to.

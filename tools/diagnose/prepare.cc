@@ -36,7 +36,9 @@ SplitData Diagnosis::prepare(const Split& s) {
     }
   }
   d.b = stacked_targets(s.Y);
+  d.friction = frictionloss_correction(d);
   d.given = d.base.times(base_.model_values);
+  if (d.friction.size()) d.given += d.friction;
   d.y0 = d.b - d.given;
   apply_filter(d);
   return d;
@@ -64,6 +66,10 @@ void Diagnosis::apply_filter(SplitData& d) const {
   for (auto& part : d.base.parts) filter_stacked(d.sos, part, d.N);
   if (filter_plan_.torques) filter_stacked(d.sos, d.b, d.N);
   d.given = d.base.times(base_.model_values);
+  if (d.friction.size()) {
+    filter_stacked(d.sos, d.friction, d.N);
+    d.given += d.friction;
+  }
   d.y0 = d.b - d.given;
 }
 

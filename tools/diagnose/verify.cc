@@ -16,6 +16,7 @@ Eigen::VectorXd Diagnosis::written_prediction(const MjcfRegressor& ext, const Mj
   const JointColumns cols(ext, s.split);
   Eigen::VectorXd pred = stacked_base_regressor(ext, ebase, s.split.X, cols, s.name) * ebase.model_values;
   filter_stacked(s.sos, pred, s.N);
+  if (s.friction.size()) pred += s.friction;   // MuJoCo's frictionloss, as in `given` (load.cc)
   return pred;
 }
 

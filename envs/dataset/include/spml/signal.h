@@ -21,7 +21,11 @@ std::vector<Eigen::Matrix<double, 5, 1>> butterworth_lowpass(int order, double c
 // The magnitude response is squared: -6 dB at the cut-off.
 Eigen::VectorXd filtfilt(const std::vector<Eigen::Matrix<double, 5, 1>>& sos, const Eigen::VectorXd& x);
 
-// Central differences (x[i+1] - x[i-1]) / (2 dt) inside, one-sided at the two ends.
+// Central differences (x[i+1] - x[i-1]) / (2 dt) inside, one-sided at the two ends: the one
+// differentiation of the project (import --derive, generate --derive, the scenarios). Applied
+// twice (NumPy's `gradient` recipe) it gives qd and qdd; unbiased for smooth signals, white
+// position noise of std s becomes s*sqrt(6)/(4 dt^2) on qdd. Twice applied, the first and last
+// two samples of qdd lean on one-sided steps: the scenario generators drop them.
 Eigen::VectorXd central_difference(const Eigen::VectorXd& x, double dt);
 
 // True when the steps of t differ from their median by more than 1 %.

@@ -6,9 +6,11 @@
 //                whose defaults parse and lie within their own bounds, with help for every key;
 //   learners     on seeded synthetic data (check_learner.cc): outputs written and finite,
 //                variances > 0, DETERMINISTIC and same-seed repeats identical, coefficients,
-//                a query of another width refused, NaN in the fit data refused;
+//                a query of another width refused, NaN in the fit data refused, the inputs
+//                left byte for byte as they were;
 //   force plugins on an MJCF with hinge and slide joints (check_force_plugin.cc): no hidden
-//                state, R(q, qd) theta = force, set_params(get_params()) a no-op, write_config
+//                state, only its own joints' dofs written, R(q, qd) theta = force,
+//                set_params(get_params()) a no-op, write_config
 //                recreates it, shape parameters valid, reset replays the first trajectory.
 #pragma once
 
@@ -48,7 +50,14 @@ struct CheckOptions {
   // keys keep their defaults. Plugins without the key ignore it.
   std::vector<std::pair<std::string, std::string>> config;
   std::function<void(const Clause&)> on_clause;         // called as each clause finishes
+  // Only the plugin of this name (its clauses, after the library's own); "" for all of them.
+  // The command runs each plugin of a library in a child of its own, two at a time.
+  std::string only_plugin;
 };
+
+// The names of the plugins a library provides, in its order; empty when it does not load as
+// either kind (its check then says why).
+std::vector<std::string> plugin_names(const std::string& file);
 
 // Runs the suite on one library file. Never throws for a bad plugin (that is a failed clause).
 LibraryReport check_library(const std::string& file, const CheckOptions& options = {});
