@@ -125,10 +125,9 @@ TEST(CheckPlugin, ACrashFailsItsClauseAndTheNextLibraryIsChecked) {
   const auto r = run(spml::test::spml_bin() + " check-plugin " + broken("learner_crash") + " " + broken("force_none"));
   SCOPED_TRACE(r.output);
   EXPECT_EQ(r.exit_code, 1);
-  // Under the sanitizers UBSan stops the child at the null store (an exit, not a signal): then
-  // the clause is not known and the library fails as a whole.
-  EXPECT_TRUE(has(r.output, "FAIL  SmallRidge  deterministic: the plugin crashed") ||
-              has(r.output, "FAIL  (library)  process: the check ended abnormally"));
+  // Under the sanitizers UBSan stops the child at the null store (an exit, not a signal).
+  EXPECT_TRUE(has(r.output, "FAIL  SmallRidge  deterministic: the plugin crashed (signal 11)") ||
+              has(r.output, "FAIL  SmallRidge  deterministic: the process exited with status"));
   EXPECT_TRUE(has(r.output, "2 libraries, "));
   EXPECT_TRUE(has(r.output, "spml: error: check-plugin: 1 of "));
   const auto j = run(spml::test::spml_bin() + " check-plugin --json " + broken("learner_crash"));
@@ -138,6 +137,50 @@ TEST(CheckPlugin, ACrashFailsItsClauseAndTheNextLibraryIsChecked) {
   ASSERT_NE(from, std::string::npos) << j.output;
   const auto doc = nlohmann::json::parse(j.output.substr(from, j.output.rfind('}') + 1 - from));
   EXPECT_EQ(doc["failed"], 1);
+}
+
+// A child that ends before reporting every clause fails the clause it was in, even when it
+// ends with status 0 (exit(0) inside fit once passed as "passed (kind unknown, 0 s)").
+TEST(CheckPlugin, ALearnerThatExitsInsideFitFailsThatClause) {
+  const auto r = check(broken("learner_exit"));
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_TRUE(has(r.output, "FAIL  SmallRidge  fit: the process exited with status 0 before the clause finished")) << r.output;
+  EXPECT_TRUE(has(r.output, "spml: error: check-plugin: 1 of ")) << r.output;
+}
+
+// A plugin that never returns is stopped at --timeout (per plugin) and fails the clause it
+// was in; the next library is still checked.
+TEST(CheckPlugin, AHangingLearnerIsStoppedAtTheTimeLimit) {
+  const auto r = run(spml::test::spml_bin() + " check-plugin --timeout 1 " + broken("learner_hang") + " " + broken("force_none"));
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_TRUE(has(r.output, "FAIL  SmallRidge  fit: did not finish within the time limit of 1 s per plugin (--timeout)")) << r.output;
+  EXPECT_TRUE(has(r.output, "2 libraries, ")) << r.output;
+  EXPECT_TRUE(has(r.output, "spml: error: check-plugin: 1 of ")) << r.output;
+  const auto zero = run(spml::test::spml_bin() + " check-plugin --timeout 0 " + broken("learner_none"));
+  EXPECT_EQ(zero.exit_code, 2) << zero.output;
+  EXPECT_TRUE(has(zero.output, "spml: error: --timeout: '0' is outside (0, 1e+06]")) << zero.output;
+}
+
+// --set is repeatable (one KEY=VALUE each); the same key twice is a usage error.
+TEST(CheckPlugin, SetIsRepeatableAndADuplicateKeyIsAUsageError) {
+  const std::string spml = spml::test::spml_bin() + " check-plugin ";
+  const auto two = run(spml + "--set lambda=0.3 --set fv=0.2 " + broken("learner_none") + " " + broken("force_none"));
+  EXPECT_EQ(two.exit_code, 0) << two.output;
+  EXPECT_TRUE(has(two.output, "with fv=0.2 ")) << two.output;   // the force plugin was created with it
+  const auto dup = run(spml + "--set lambda=0.3 --set lambda=0.2 " + broken("learner_none"));
+  EXPECT_EQ(dup.exit_code, 2) << dup.output;
+  EXPECT_TRUE(has(dup.output, "spml: error: --set: key 'lambda' given twice (lambda=0.3, lambda=0.2)")) << dup.output;
+}
+
+// What a plugin prints goes to stderr: stdout holds the --json document alone.
+TEST(CheckPlugin, PluginOutputDoesNotCorruptTheJsonDocument) {
+  const auto r = run("( " + spml::test::spml_bin() + " check-plugin --json " + broken("learner_stdout") + " 2>/dev/null )");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  const auto doc = nlohmann::json::parse(r.output, nullptr, false);
+  ASSERT_FALSE(doc.is_discarded()) << r.output;
+  EXPECT_EQ(doc["failed"], 0);
+  const auto both = run(spml::test::spml_bin() + " check-plugin " + broken("learner_stdout"));
+  EXPECT_TRUE(has(both.output, "fitting 40 rows")) << both.output;   // still shown, on stderr
 }
 
 TEST(CheckPlugin, JsonCountsTheFailures) {

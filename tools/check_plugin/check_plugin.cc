@@ -18,8 +18,6 @@
 namespace spml::check {
 namespace {
 
-char g_running[512] = "";
-
 const char* verdict_word(Verdict v) { return v == Verdict::kPass ? "PASS" : v == Verdict::kFail ? "FAIL" : "SKIP"; }
 
 // Which ABI the library speaks, by the version symbol it exports ("" for neither).
@@ -109,8 +107,6 @@ bool LibraryReport::passed() const {
   return !clauses.empty();
 }
 
-const char* running_clause() { return g_running; }
-
 std::string num(double v) { return number_text(v, 6); }
 
 void Recorder::record(const std::string& plugin, const std::string& clause, Outcome outcome) {
@@ -118,15 +114,18 @@ void Recorder::record(const std::string& plugin, const std::string& clause, Outc
   if (options_.on_clause) options_.on_clause(report_.clauses.back());
 }
 
+void Recorder::start(const std::string& plugin, const std::string& clause) {
+  if (options_.on_start) options_.on_start(plugin, clause);
+}
+
 void Recorder::run(const std::string& plugin, const std::string& clause, const std::function<Outcome()>& body) {
-  std::snprintf(g_running, sizeof g_running, "%s %s", plugin.c_str(), clause.c_str());
+  start(plugin, clause);
   Outcome outcome;
   try {
     outcome = body();
   } catch (const std::exception& e) {
     outcome = fail(e.what());
   }
-  g_running[0] = '\0';
   record(plugin, clause, std::move(outcome));
 }
 
@@ -153,6 +152,7 @@ std::string key_table_problems(const spml_config_key* table, bool force_plugin) 
 
 std::unique_ptr<PluginLibrary> load_library(const std::string& file, const PluginKind& kind, Recorder& recorder) {
   std::unique_ptr<PluginLibrary> lib;
+  recorder.start("", "abi-version");   // loading runs the library's own code
   try {
     lib = std::make_unique<PluginLibrary>(file, kind);
   } catch (const PluginError& e) {
@@ -181,6 +181,7 @@ LibraryReport check_library(const std::string& file, const CheckOptions& options
   report.file = file;
   Recorder recorder(report, options);
   std::string problem;
+  recorder.start("", "abi-version");
   report.kind = kind_of(file, &problem);
   if (report.kind.empty()) recorder.record("", "abi-version", fail(problem));
   else if (report.kind == "learner") check_learners(file, recorder);

@@ -19,13 +19,15 @@ inline Outcome pass(std::string detail = "") { return {Verdict::kPass, std::move
 inline Outcome fail(std::string detail) { return {Verdict::kFail, std::move(detail)}; }
 inline Outcome skip(std::string detail) { return {Verdict::kSkip, std::move(detail)}; }
 
-// Collects the clauses of one library; run() names the clause while it runs (for a crash
-// handler) and turns an exception into a failure of that clause.
+// Collects the clauses of one library; run() announces the clause as it starts (so that a
+// checker running it in a child can name the clause a crash, an exit or a hang happened in)
+// and turns an exception into a failure of that clause.
 class Recorder {
  public:
   Recorder(LibraryReport& report, const CheckOptions& options) : report_(report), options_(options) {}
   void run(const std::string& plugin, const std::string& clause, const std::function<Outcome()>& body);
   void record(const std::string& plugin, const std::string& clause, Outcome outcome);
+  void start(const std::string& plugin, const std::string& clause);
   std::uint64_t seed() const { return options_.seed; }
   bool wanted(const std::string& plugin) const { return options_.only_plugin.empty() || options_.only_plugin == plugin; }
   // The --set values for keys of `table`; throws naming the key when a value does not suit it.

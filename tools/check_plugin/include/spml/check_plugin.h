@@ -50,6 +50,9 @@ struct CheckOptions {
   // keys keep their defaults. Plugins without the key ignore it.
   std::vector<std::pair<std::string, std::string>> config;
   std::function<void(const Clause&)> on_clause;         // called as each clause finishes
+  // Called as each clause starts (plugin "" for the library's own), before any plugin code of
+  // it runs: a child process reports it so that its parent can name the clause it ended in.
+  std::function<void(const std::string& plugin, const std::string& clause)> on_start;
   // Only the plugin of this name (its clauses, after the library's own); "" for all of them.
   // The command runs each plugin of a library in a child of its own, two at a time.
   std::string only_plugin;
@@ -71,8 +74,5 @@ std::string config_problem(const std::vector<std::string>& files, const std::vec
 // "PASS  <plugin>  <clause>: <detail>" (FAIL, SKIP), one line, for people.
 std::string clause_line(const Clause& clause);
 nlohmann::json to_json(const LibraryReport& report);
-
-// The clause running now ("<plugin> <clause>"), for a crash handler to name; "" between clauses.
-const char* running_clause();
 
 }  // namespace spml::check
