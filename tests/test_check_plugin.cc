@@ -99,6 +99,46 @@ TEST(CheckPlugin, SetWithAnUnknownKeyOrABadValueIsAUsageError) {
   EXPECT_EQ(fine.exit_code, 0) << fine.output;   // a key only one of the libraries has is fine
 }
 
+// Once the force is not finite, the clauses that compare forces say so instead of reporting
+// "difference nan, allowed nan". The fixture is NaN only where |q| > 1.5: the states reach 3.
+TEST(CheckPlugin, RefusesANanForceFarOutAndSkipsTheComparisons) {
+  expect_only_failure("force_nan_far", "broken_viscous finite-force");
+  const auto r = check(broken("force_nan_far"));
+  EXPECT_TRUE(has(r.output, "FAIL  broken_viscous  finite-force: force nan on dof")) << r.output;
+  EXPECT_TRUE(has(r.output, "SKIP  broken_viscous  no-hidden-state: skipped: the force is not finite (finite-force)")) << r.output;
+  EXPECT_TRUE(has(r.output, "SKIP  broken_viscous  params-roundtrip: skipped: the force is not finite (finite-force)")) << r.output;
+  EXPECT_FALSE(has(r.output, "difference nan")) << r.output;
+}
+
+// write_config is also checked on an instance created with every key drawn away from its
+// default: words that leave out `gain` recreate it only while gain is 1.
+TEST(CheckPlugin, RefusesAWriteConfigThatDropsAKey) {
+  expect_only_failure("force_drop_key", "broken_viscous write-config");
+  EXPECT_TRUE(has(check(broken("force_drop_key")).output, "write-config: created with every key drawn (")) << "";
+}
+
+// A regressor 10 % off only where |qd| > 2.5: the speeds reach 10 (log-uniform from 1e-3).
+TEST(CheckPlugin, RefusesARegressorWrongOnlyAtHighSpeed) {
+  expect_only_failure("force_regressor_fast", "broken_viscous regressor");
+}
+
+// A learner NaN only where |x0| > 3 (training reaches 2, the query 4), or only on queries of
+// more than 20 rows (the query has 200).
+TEST(CheckPlugin, RefusesALearnerNanOnlyFarOutOrOnALongQuery) {
+  expect_only_failure("learner_nan_far", "SmallRidge outputs-written");
+  expect_only_failure("learner_nan_many", "SmallRidge outputs-written");
+  EXPECT_TRUE(has(check(broken("learner_nan_many")).output, "400 of 400 means unwritten or non-finite"));
+}
+
+// Hidden state that appears only after 200 compute calls: no-hidden-state repeats its states
+// after 500 calls.
+TEST(CheckPlugin, RefusesHiddenStateThatAppearsLate) {
+  const auto r = check(broken("force_hidden_late"));
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_TRUE(contains(failed_clauses(r.output), "broken_viscous no-hidden-state")) << r.output;
+  EXPECT_TRUE(has(r.output, "without advance (hidden state): dof 0: after 500 calls")) << r.output;
+}
+
 // Hidden state shows in every clause that calls compute twice; the one it breaks is named.
 TEST(CheckPlugin, RefusesHiddenStateInAPluginDeclaringNone) {
   const auto r = check(broken("force_hidden_state"));

@@ -2,7 +2,9 @@
 // in a chain. Every plugin is created on all three joints through the host's own path
 // (PluginInstance: the key table checked, defaults filled), with required keys drawn from the
 // seed: shape parameters inside their search range, other numbers in [0.1, 2] clipped to the
-// key's bounds; a draw the plugin refuses (e.g. lower >= upper) is redrawn.
+// key's bounds; a draw the plugin refuses (e.g. lower >= upper) is redrawn. The states reach
+// several rad (m) and rad/s (m/s), speeds log-uniform over four decades with either sign, so
+// that a fault that shows only far out or only fast (or slow) does not pass.
 #include <unistd.h>
 
 #include <algorithm>
@@ -39,8 +41,11 @@ constexpr const char* kModel = R"(<mujoco model="spml-check-plugin">
   </worldbody>
 </mujoco>
 )";
-constexpr double kQ = 1.0, kQd = 2.0;   // states: |q| <= kQ, |qd| <= kQd
+// States: q uniform in [-kQ, kQ] (the joints are unlimited), |qd| log-uniform in
+// [kQdMin, kQd] with a random sign.
+constexpr double kQ = 3.0, kQd = 10.0, kQdMin = 1e-3;
 constexpr int kStates = 20, kAttempts = 50;
+constexpr int kManyCalls = 500;   // compute calls before the no-hidden-state repeat
 constexpr double kRelTol = 1e-9;
 
 ModelPtr write_and_load_model(std::uint64_t seed) {
@@ -64,13 +69,14 @@ struct State {
 
 std::vector<State> random_states(const mjModel* m, std::uint64_t seed, int count) {
   std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> q(-kQ, kQ), qd(-kQd, kQd);
+  std::uniform_real_distribution<double> q(-kQ, kQ), log_speed(std::log(kQdMin), std::log(kQd));
+  std::bernoulli_distribution negative(0.5);
   std::vector<State> out(static_cast<size_t>(count));
   for (auto& s : out) {
     s.qpos.resize(static_cast<size_t>(m->nq));
     s.qvel.resize(static_cast<size_t>(m->nv));
     for (auto& v : s.qpos) v = q(rng);
-    for (auto& v : s.qvel) v = qd(rng);
+    for (auto& v : s.qvel) v = (negative(rng) ? -1 : 1) * std::exp(log_speed(rng));
   }
   return out;
 }
@@ -91,6 +97,8 @@ std::string disagreement(const std::vector<mjtNum>& a, const std::vector<mjtNum>
                          const std::string& what_a, const std::string& what_b) {
   for (size_t i = 0; i < a.size(); ++i) {
     const double tol = rel * std::max(scale.empty() ? std::max(std::fabs(a[i]), std::fabs(b[i])) : scale[i], 1e-300);
+    if (!std::isfinite(a[i]) || !std::isfinite(b[i]))   // no "difference nan" for a value that is not a number
+      return "dof " + std::to_string(i) + ": " + what_a + " " + num(a[i]) + ", " + what_b + " " + num(b[i]) + " (not finite)";
     if (!(std::fabs(a[i] - b[i]) <= tol) && !(rel == 0 && a[i] == b[i]))
       return "dof " + std::to_string(i) + ": " + what_a + " " + num(a[i]) + ", " + what_b + " " + num(b[i]) + " (difference " +
              num(std::fabs(a[i] - b[i])) + ", allowed " + num(tol) + ")";
@@ -137,9 +145,10 @@ std::string config_text(const std::vector<std::pair<std::string, std::string>>& 
 }
 
 // The instance every clause uses, or the reason none could be made.
+// `vary`: draw every numeric key the user did not --set, those with a default too.
 std::unique_ptr<PluginInstance> create(const spml_force_plugin& p, const mjModel* m, std::uint64_t seed,
                                        const std::vector<std::pair<std::string, std::string>>& given, std::string* detail,
-                                       const std::vector<int>& joints = {0, 1, 2}) {
+                                       const std::vector<int>& joints = {0, 1, 2}, bool vary = false) {
   std::mt19937_64 rng(seed);
   std::string last;
   for (int attempt = 0; attempt < kAttempts; ++attempt) {
@@ -147,7 +156,7 @@ std::unique_ptr<PluginInstance> create(const spml_force_plugin& p, const mjModel
     for (const spml_config_key* k = p.config_keys; k && k->name; ++k) {
       bool set = false;
       for (const auto& kv : given) set |= kv.first == k->name;
-      if (k->default_value || set) continue;
+      if (set || (k->default_value && !(vary && k->type != SPML_VALUE_TEXT))) continue;
       std::string v = draw_value(*k, shape_of(p, k->name), rng);
       if (v.empty()) {
         *detail = "required key '" + std::string(k->name) + "' is text without a default: the checker cannot make a value";
@@ -198,12 +207,21 @@ struct Bench {
   std::string name;
 };
 
-Outcome finite_and_additive(Bench& b) {
+// `finite` tells whether every force was finite (additivity aside): the other clauses compare
+// forces and are skipped when it is not.
+Outcome finite_and_additive(Bench& b, bool& finite) {
   const std::vector<mjtNum> offset{1.0, -2.0, 3.0};
+  finite = false;
   for (size_t s = 0; s < b.states.size(); ++s) {
     const auto f = force(b.inst, b.m, b.d.get(), b.states[s]);
     for (size_t i = 0; i < f.size(); ++i)
-      if (!std::isfinite(f[i])) return fail("force " + num(f[i]) + " on dof " + std::to_string(i) + " at state " + std::to_string(s));
+      if (!std::isfinite(f[i]))
+        return fail("force " + num(f[i]) + " on dof " + std::to_string(i) + " at state " + std::to_string(s) + " (q " +
+                    num(b.states[s].qpos[b.m->jnt_qposadr[b.m->dof_jntid[i]]]) + ", qd " + num(b.states[s].qvel[i]) + ")");
+  }
+  finite = true;
+  for (size_t s = 0; s < b.states.size(); ++s) {
+    const auto f = force(b.inst, b.m, b.d.get(), b.states[s]);
     auto g = force(b.inst, b.m, b.d.get(), b.states[s], offset);
     std::vector<double> scale(f.size());
     for (size_t i = 0; i < f.size(); ++i) {
@@ -213,18 +231,29 @@ Outcome finite_and_additive(Bench& b) {
     if (std::string why = disagreement(g, f, kRelTol, scale, "added into a non-zero qfrc", "into zeros"); !why.empty())
       return fail("compute must add into qfrc, state " + std::to_string(s) + ": " + why);
   }
-  return pass("finite at " + std::to_string(b.states.size()) + " random states, added into qfrc");
+  return pass("finite at " + std::to_string(b.states.size()) + " random states (|q| <= " + num(kQ) + ", " + num(kQdMin) +
+              " <= |qd| <= " + num(kQd) + "), added into qfrc");
 }
 
+// Compute at every state, then kManyCalls more calls, then every state again (hidden state that
+// appears only after many calls), and each state around a call at another state.
 Outcome no_hidden_state(Bench& b) {
+  std::vector<std::vector<mjtNum>> first;
+  for (const auto& s : b.states) first.push_back(force(b.inst, b.m, b.d.get(), s));
+  for (int k = 0; k < kManyCalls; ++k) force(b.inst, b.m, b.d.get(), b.states[static_cast<size_t>(k) % b.states.size()]);
+  for (size_t s = 0; s < b.states.size(); ++s)
+    if (std::string why = disagreement(force(b.inst, b.m, b.d.get(), b.states[s]), first[s], 0, {}, "after " + std::to_string(kManyCalls) + " calls", "first");
+        !why.empty())
+      return fail("compute gave another force at the same state " + std::to_string(s) + " without advance (hidden state): " + why);
   for (size_t s = 0; s + 1 < b.states.size(); ++s) {
-    const auto first = force(b.inst, b.m, b.d.get(), b.states[s]);
+    const auto before = force(b.inst, b.m, b.d.get(), b.states[s]);
     force(b.inst, b.m, b.d.get(), b.states[s + 1]);
     const auto again = force(b.inst, b.m, b.d.get(), b.states[s]);
-    if (std::string why = disagreement(again, first, 0, {}, "second call", "first"); !why.empty())
+    if (std::string why = disagreement(again, before, 0, {}, "second call", "first"); !why.empty())
       return fail("compute gave another force at the same state " + std::to_string(s) + " without advance (hidden state): " + why);
   }
-  return pass("same force at the same state, " + std::to_string(b.states.size()) + " states, no advance between");
+  return pass("same force at the same state, " + std::to_string(b.states.size()) + " states, before and after " +
+              std::to_string(kManyCalls) + " other calls, no advance between");
 }
 
 // R theta against compute at every state, for the current parameters.
@@ -284,35 +313,51 @@ Outcome params_roundtrip(Bench& b) {
   return pass(std::to_string(np) + " named parameters; set_params(get_params()) changes nothing");
 }
 
-Outcome write_config(Bench& b) {
-  if (!b.p.write_config) return skip("no write_config");
-  const Eigen::VectorXd theta = b.inst.params();
-  b.inst.set_params(1.25 * theta);   // the written text must carry set_params' values
+// After set_params(1.25 theta) on `inst`, its written words create (through the host) an
+// instance with the same parameters and force; "" when they do, else what differs. `text`
+// receives the words.
+std::string recreate_problem(Bench& b, PluginInstance& inst, std::string* text) {
+  const Eigen::VectorXd theta = inst.params();
+  inst.set_params(1.25 * theta);   // the written text must carry set_params' values
   struct Restore {
     PluginInstance& i;
     Eigen::VectorXd t;
     ~Restore() { i.set_params(t); }
-  } restore{b.inst, theta};
-  const std::string text = b.inst.config_text();
-  if (text.empty()) return fail("write_config wrote nothing");
+  } restore{inst, theta};
+  *text = inst.config_text();
+  if (text->empty()) return "write_config wrote nothing";
   std::unique_ptr<PluginInstance> again;
   try {
-    again = std::make_unique<PluginInstance>(b.p, b.m, std::vector<int>{0, 1, 2}, parse_config_words(text, "written config"), "written config");
+    again = std::make_unique<PluginInstance>(b.p, b.m, std::vector<int>{0, 1, 2}, parse_config_words(*text, "written config"), "written config");
   } catch (const std::exception& e) {
-    return fail("'" + text + "' does not create the plugin: " + e.what());
+    return "'" + *text + "' does not create the plugin: " + e.what();
   }
   const Eigen::VectorXd t2 = again->params();
-  if (t2.size() != theta.size()) return fail("'" + text + "' recreates " + std::to_string(t2.size()) + " parameters, not " + std::to_string(theta.size()));
+  if (t2.size() != theta.size()) return "'" + *text + "' recreates " + std::to_string(t2.size()) + " parameters, not " + std::to_string(theta.size());
   std::vector<mjtNum> a(static_cast<size_t>(t2.size())), c(a.size());
   for (Eigen::Index i = 0; i < t2.size(); ++i) a[i] = 1.25 * theta[i], c[i] = t2[i];
   if (std::string why = disagreement(c, a, kRelTol, {}, "recreated", "written"); !why.empty())
-    return fail("'" + text + "': parameters differ: " + why.replace(0, 3, "parameter"));
+    return "'" + *text + "': parameters differ: " + why.replace(0, 3, "parameter");
   for (size_t s = 0; s < b.states.size(); ++s)
-    if (std::string why = disagreement(force(*again, b.m, b.d.get(), b.states[s]), force(b.inst, b.m, b.d.get(), b.states[s]),
+    if (std::string why = disagreement(force(*again, b.m, b.d.get(), b.states[s]), force(inst, b.m, b.d.get(), b.states[s]),
                                        kRelTol, {}, "recreated", "original");
         !why.empty())
-      return fail("recreated from '" + text + "' the force differs at state " + std::to_string(s) + ": " + why);
-  return pass("'" + text + "' recreates the parameters and the force within rel " + num(kRelTol));
+      return "recreated from '" + *text + "' the force differs at state " + std::to_string(s) + ": " + why;
+  return "";
+}
+
+// Twice: on the instance every clause uses (defaults kept), and on one created with every
+// numeric key drawn (seeded, in range), so that words that leave out a key the user set fail.
+Outcome write_config(Bench& b, const std::vector<std::pair<std::string, std::string>>& given, std::uint64_t seed) {
+  if (!b.p.write_config) return skip("no write_config");
+  std::string text, varied_text, detail;
+  if (std::string why = recreate_problem(b, b.inst, &text); !why.empty()) return fail(why);
+  const auto varied = create(b.p, b.m, seed + 2, given, &detail, {0, 1, 2}, true);
+  const std::string ok = "recreate the parameters and the force within rel " + num(kRelTol);
+  if (!varied) return pass("'" + text + "' " + ok + "; no configuration with every key drawn was accepted (" + detail + ")");
+  if (std::string why = recreate_problem(b, *varied, &varied_text); !why.empty())
+    return fail("created with every key drawn (" + detail + "): " + why);
+  return pass("'" + text + "' and, with every key drawn, '" + varied_text + "' " + ok);
 }
 
 // Attached to the middle joint (slide) only, compute adds into qfrc pre-filled with other
@@ -387,13 +432,18 @@ void check_one(const spml_force_plugin& p, const mjModel* m, Recorder& r) {
   });
   if (!inst) return;
   Bench b{p, m, make_data(m), *inst, random_states(m, r.seed() + 1, kStates), name};
-  r.run(name, "no-hidden-state", [&] { return no_hidden_state(b); });
-  r.run(name, "finite-force", [&] { return finite_and_additive(b); });
-  r.run(name, "own-dofs", [&] { return own_dofs(b, given, r.seed()); });
-  r.run(name, "regressor", [&] { return regressor(b); });
-  r.run(name, "params-roundtrip", [&] { return params_roundtrip(b); });
-  r.run(name, "write-config", [&] { return write_config(b); });
-  r.run(name, "reset", [&] { return reset(b); });
+  bool finite = false;
+  r.run(name, "finite-force", [&] { return finite_and_additive(b, finite); });
+  // Every other clause compares forces; a NaN makes each comparison fail with NaN numbers.
+  auto compare = [&](const char* clause, const std::function<Outcome()>& body) {
+    r.run(name, clause, [&] { return finite ? body() : skip("skipped: the force is not finite (finite-force)"); });
+  };
+  compare("no-hidden-state", [&] { return no_hidden_state(b); });
+  compare("own-dofs", [&] { return own_dofs(b, given, r.seed()); });
+  compare("regressor", [&] { return regressor(b); });
+  compare("params-roundtrip", [&] { return params_roundtrip(b); });
+  compare("write-config", [&] { return write_config(b, given, r.seed()); });
+  compare("reset", [&] { return reset(b); });
 }
 
 }  // namespace

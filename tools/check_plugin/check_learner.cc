@@ -1,6 +1,9 @@
 // The learner clauses, on small seeded synthetic data: 3 inputs, 2 outputs and a linear
 // parametric model with 3 coefficients (prior and truth given when the flags ask for them),
-// plus a residual the model cannot express and a little noise.
+// plus a residual the model cannot express and a little noise. Training inputs lie in
+// [-2, 2]; the query is larger (200 rows) and reaches twice as far, [-4, 4], because a
+// learner is asked to extrapolate (spml bench's extrapolation split) and a fault that shows
+// only far out or only on a long query must not pass.
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -14,7 +17,8 @@
 namespace spml::check {
 namespace {
 
-constexpr int kInputs = 3, kOutputs = 2, kParams = 3, kTrainRows = 40, kQueryRows = 9;
+constexpr int kInputs = 3, kOutputs = 2, kParams = 3, kTrainRows = 40, kQueryRows = 200;
+constexpr double kTrainReach = 2, kQueryReach = 4;   // inputs uniform in [-reach, reach]
 const double kTheta[kParams] = {1.5, -0.8, 0.6};
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
@@ -28,9 +32,9 @@ struct Data {
   }
 };
 
-Data synthetic(int64_t rows, std::uint64_t seed) {
+Data synthetic(int64_t rows, std::uint64_t seed, double reach) {
   std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> u(-2, 2);
+  std::uniform_real_distribution<double> u(-reach, reach);
   std::normal_distribution<double> noise(0, 0.05);
   Data d;
   d.rows = rows;
@@ -166,7 +170,7 @@ std::string difference(const Prediction& a, const Prediction& b) {
 }
 
 Outcome outputs_written(const Prediction& p) {
-  if (p.rc != 0) return fail("predict failed on a query like the training data: " + p.error);
+  if (p.rc != 0) return fail("predict failed on a query of the training width: " + p.error);
   auto bad = [](const std::vector<double>& v, const char* what) -> std::string {
     size_t count = 0, first = 0;
     for (size_t i = v.size(); i-- > 0;)
@@ -179,7 +183,8 @@ Outcome outputs_written(const Prediction& p) {
   if (why.empty()) why = bad(p.var, "variances");
   if (!why.empty()) return fail(why);
   return pass(std::to_string(p.mean.size()) + " means" + (p.var.empty() ? "" : " and " + std::to_string(p.var.size()) + " variances") +
-              " written, finite");
+              " written, finite (" + std::to_string(kQueryRows) + " rows in [-" + num(kQueryReach) + ", " + num(kQueryReach) +
+              "], trained on [-" + num(kTrainReach) + ", " + num(kTrainReach) + "])");
 }
 
 // Over the variances written (an unwritten one is outputs-written's failure).
@@ -239,7 +244,7 @@ void check_one(const spml_learner& l, Recorder& r) {
     const std::string why = key_table_problems(l.config_keys, false);
     return why.empty() ? pass() : fail(why);
   });
-  const Data train = synthetic(kTrainRows, r.seed()), query = synthetic(kQueryRows, r.seed() + 1);
+  const Data train = synthetic(kTrainRows, r.seed(), kTrainReach), query = synthetic(kQueryRows, r.seed() + 1, kQueryReach);
   std::unique_ptr<Fit> a;
   Prediction pa;
   std::vector<std::pair<std::string, std::string>> given;
