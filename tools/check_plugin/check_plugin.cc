@@ -69,6 +69,11 @@ std::vector<std::pair<std::string, const spml_config_key*>> key_tables(const std
 
 }  // namespace
 
+std::string library_kind(const std::string& file) {
+  std::string problem;
+  return kind_of(file, &problem);
+}
+
 std::vector<std::string> plugin_names(const std::string& file) {
   std::shared_ptr<PluginLibrary> keep;
   std::vector<std::string> out;

@@ -53,7 +53,8 @@ struct Job {
   int fd = -1;
   std::string text;   // the lines it sent
   int status = 0;
-  std::chrono::steady_clock::time_point deadline;
+  std::chrono::steady_clock::time_point started, deadline;
+  double seconds = 0;   // wall time, start to end, as the parent saw it
   bool timed_out = false;
 };
 
@@ -77,6 +78,9 @@ class StdoutToStderr {
 [[noreturn]] void child(Job& job, int fd) {
   g_clause_fd = fd;
   dup2(STDERR_FILENO, STDOUT_FILENO);
+  // A plugin that calls exit(): end at once with its status, running none of the parent's
+  // atexit work (nor a leak check of a process cut off mid-clause).
+  on_exit([](int status, void*) { _exit(status); }, nullptr);
   job.options.on_start = [](const std::string& plugin, const std::string& clause) {
     write_all(g_clause_fd, nlohmann::json{{"running", {{"plugin", plugin}, {"clause", clause}}}}.dump() + "\n");
   };
@@ -104,7 +108,8 @@ void start(Job& job, double timeout) {
   }
   close(fds[1]);
   job.fd = fds[0];
-  job.deadline = std::chrono::steady_clock::now() + std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(timeout));
+  job.started = std::chrono::steady_clock::now();
+  job.deadline = job.started + std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(timeout));
 }
 
 // Why a child that did not send its last line ended: killed at the time limit, a signal, or an exit.
@@ -137,6 +142,7 @@ check::LibraryReport report_of(const Job& job, double timeout) {
     }
   }
   if (!done) {
+    r.seconds = job.seconds;
     const bool in_clause = !clause.empty();
     r.clauses.push_back({in_clause ? plugin : "", in_clause ? clause : "process", check::Verdict::kFail, how_it_ended(job, timeout, in_clause)});
   } else if (!(WIFEXITED(job.status) && WEXITSTATUS(job.status) == 0)) {
@@ -154,6 +160,7 @@ void run_jobs(std::vector<Job>& jobs, size_t parallel, double timeout) {
     close(j->fd);
     j->fd = -1;
     waitpid(j->pid, &j->status, 0);
+    j->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - j->started).count();
   };
   while (next < jobs.size() || !active.empty()) {
     while (active.size() < parallel && next < jobs.size()) {
@@ -219,6 +226,10 @@ std::vector<check::LibraryReport> check_all(const std::vector<std::string>& file
         if (k == range[i].first || !c.plugin.empty() || c.name == "process") r.clauses.push_back(c);
       if (r.kind.empty()) r.kind = part.kind;
       r.seconds += part.seconds;
+    }
+    if (r.kind.empty()) {   // every child ended early: the kind is the library's, told here
+      StdoutToStderr quiet;
+      r.kind = check::library_kind(files[i]);
     }
     out.push_back(std::move(r));
   }

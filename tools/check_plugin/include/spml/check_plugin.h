@@ -62,6 +62,10 @@ struct CheckOptions {
 // either kind (its check then says why).
 std::vector<std::string> plugin_names(const std::string& file);
 
+// "learner" or "force plugin" by the symbols the library exports; "" when it is neither or
+// does not load.
+std::string library_kind(const std::string& file);
+
 // Runs the suite on one library file. Never throws for a bad plugin (that is a failed clause).
 LibraryReport check_library(const std::string& file, const CheckOptions& options = {});
 
