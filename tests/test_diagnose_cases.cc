@@ -8,7 +8,7 @@
 
 #include "diagnose_draws.h"
 #include "diagnosis.h"
-#include "extended_mjcf.h"
+#include "spml/envs/mjcf_edit.h"
 #include "spml/diagnose.h"
 #include "spml/envs/mujoco_model.h"
 #include "test_util.h"
@@ -125,12 +125,12 @@ TEST(DiagnoseCases, ExtendedModelOfUnusualLegalMjcfLoads) {
                           "      <body name=\"c\" pos=\"0.3 0 0\"><joint name=\"joint2\" type=\"hinge\"/><geom size=\"0.1\" mass=\"1\"/></body>\n"
                           "    </body>\n  </worldbody>\n  <equality><joint name=\"joint1\" joint1=\"joint1\" joint2=\"joint2\"/></equality>\n"
                           "  <custom><text name=\"spml.plugin.diagnosed_coulomb_joint1\" data=\"type=coulomb joints=joint1 fc=0.1\"/></custom>\n</mujoco>\n";
-  diagnose_detail::MjcfEdits e;
+  MjcfEdits e;
   e.joint_attributes["joint1"]["damping"] = 0.5;
   e.texts.emplace_back("spml.plugin.diagnosed_coulomb_joint1", "type=coulomb joints=joint1 fc=0.2");
   e.comment = "from data/a-->b<x>.h5 -- test";
   std::vector<std::string> notes;
-  const std::string out = diagnose_detail::write_extended_mjcf(model, e, notes);
+  const std::string out = edit_mjcf(model, e, notes);
   EXPECT_EQ(out.rfind("<?xml", 0), 0u) << out;                               // the declaration stays first
   EXPECT_EQ(out.find("-->b<x>"), std::string::npos) << out;                  // no markup from the comment
   EXPECT_NE(out.find("spml.plugin.diagnosed_coulomb_joint1_2"), std::string::npos) << out;   // no repeated name

@@ -38,6 +38,8 @@ void add_diagnose(CLI::App& app) {
       ->capture_default_str()->check(finite_number(0.0, 1e6));
   cmd->add_option("--ripple-gear", o->ripple_gear, "the drive's gear ratio: ripple is searched at this wavenumber only (0: search)")
       ->capture_default_str()->check(finite_number(0.0, 1e9));
+  cmd->add_option("--prior-weight", o->prior_weight, "weight of the prior toward the MJCF in the consistent fit extended.xml states when parameters are named")
+      ->capture_default_str()->check(finite_number(1e-6, 1e6));
   cmd->add_flag("--no-plots", *no_plots, "do not draw plots/ (needs /usr/bin/python3 with matplotlib)");
   cmd->callback([=] {
     add_plugin_paths(*paths);

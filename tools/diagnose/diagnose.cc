@@ -120,6 +120,7 @@ void DiagnoseOptions::check() const {
   in("rollouts", rollouts, 0, 10000);
   in("min_ripple_periods", min_ripple_periods, 0, 1e6);
   in("ripple_gear", ripple_gear, 0, 1e9);
+  in("prior_weight", prior_weight, 1e-6, 1e6);
 }
 
 DiagnoseResult diagnose(const DiagnoseOptions& options, const std::string& out_dir,

@@ -7,6 +7,7 @@
 //   candidates.cc  the force plugins as candidate causes, and their regressor columns
 //   shape_search.cc  the shape of one candidate (grid, zoom, plateau middle, local polish)
 //   selection.cc   forward selection, backward elimination, the `parameters` decision
+//   written_parameters.cc  the physically consistent parameters extended.xml states
 //   verify.cc      the written model: extended.xml, its own inverse dynamics, rollouts
 //   report_json.cc report.json (causes, metrics, cross-tests) and series.csv
 #pragma once
@@ -15,15 +16,17 @@
 #include <chrono>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <set>
 #include <string>
 #include <utility>
 #include <vector>
 
 #include "design.h"
-#include "extended_mjcf.h"
+#include "spml/envs/mjcf_edit.h"
 #include "filtering.h"
 #include "spml/diagnose.h"
+#include "spml/envs/consistent_identification.h"
 #include "spml/envs/mjcf_regressor.h"
 #include "spml/force_effects.h"
 
@@ -68,6 +71,13 @@ struct Cause {
   double delta_bic;
   std::string superseded_by;
 };
+
+// The parameters extended.xml states when `parameters` is named (written_parameters.cc).
+struct WrittenParameters {
+  ConsistentIdentification id;      // standard parameters; id.extra: the kept effects' coefficients
+  Eigen::VectorXd prediction_fit;   // its torques on the fit split (through the parallel filter)
+};
+nlohmann::json written_parameters_json(const WrittenParameters& w);
 
 // The split with its torque columns in `order` (matched by name); throws naming `file` when
 // the names differ.
@@ -139,12 +149,12 @@ class Diagnosis {
   nlohmann::json cross_errors(const std::vector<int>& causes, bool base_free, const Fit& f) const;
   void build_report(const std::string& out_dir);
   nlohmann::json parameters_cause(const Fit& final_fit, MjcfEdits& edits, std::vector<std::string>& notes) const;
-  void parameter_edits(const Eigen::VectorXd& pi, MjcfEdits& edits, std::vector<std::string>& notes) const;
-  void inertial_edit(const Eigen::VectorXd& pi, const std::string& body, MjcfEdits& edits, std::vector<std::string>& notes) const;
   nlohmann::json effect_cause(size_t i, const Fit& final_fit, bool free, MjcfEdits& edits, std::vector<std::string>& notes,
                               nlohmann::json& cross_after) const;
   nlohmann::json cross_report(const Fit& final_fit, bool free, const nlohmann::json& cross_after) const;
   void write_series(const std::string& out_dir, const Eigen::VectorXd& final_pred_fit, const Eigen::VectorXd& final_test) const;
+  // written_parameters.cc
+  WrittenParameters consistent_parameters() const;
   // verify.cc
   std::pair<Eigen::VectorXd, Eigen::VectorXd> verify(const std::string& out_dir, MjcfEdits& edits, std::vector<std::string>& notes,
                                                      const Eigen::VectorXd& final_pred_fit);
@@ -168,7 +178,8 @@ class Diagnosis {
   bool parameters_named_ = false;
   double parameters_delta_bic_ = 0, parameters_n_eff_ = 0;
   int parameters_contradicted_ = 0;
-  mutable bool parameters_partial_ = false;   // some re-identified inertial could not be written   // base parameters beyond 3 robust standard errors
+  mutable bool parameters_partial_ = false;   // some re-identified parameter has no MJCF attribute written
+  std::optional<WrittenParameters> written_;  // set in build_report when `parameters` is named
   std::vector<std::string> notes_;
   FilterPlan filter_plan_;
 };

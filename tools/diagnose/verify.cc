@@ -33,7 +33,17 @@ std::pair<Eigen::VectorXd, Eigen::VectorXd> Diagnosis::verify(const std::string&
   if (!out_dir.empty()) fs::create_directories(out_dir);
   // Writes one version of the model and returns its predictions on the fit and test splits.
   auto write_and_score = [&](const MjcfEdits& e, std::vector<std::string>& n) {
-    result_.extended_mjcf = write_extended_mjcf(opt_.model, e, n);
+    try {
+      result_.extended_mjcf = edit_mjcf(opt_.model, e, n);
+    } catch (const std::runtime_error& err) {
+      if (e.inertials.empty()) throw;
+      // A compiler setting that would override written inertials (inertiafromgeom, settotalmass).
+      MjcfEdits without = e;
+      without.inertials.clear();
+      n.push_back(std::string(err.what()) + ": the re-identified inertials are not written");
+      parameters_partial_ = true;
+      result_.extended_mjcf = edit_mjcf(opt_.model, without, n);
+    }
     write_text_atomic(ext_path.string(), result_.extended_mjcf);
     MjcfRegressor ext(ext_path.string());
     const auto ebase = ext.base_parameters();
