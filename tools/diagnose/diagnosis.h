@@ -8,6 +8,7 @@
 //   shape_search.cc  the shape of one candidate (grid, zoom, plateau middle, local polish)
 //   selection.cc   forward selection, backward elimination, the `parameters` decision
 //   written_parameters.cc  the physically consistent parameters extended.xml states
+//   confirm.cc     causes whose written form makes rollouts worse beyond noise are rejected
 //   verify.cc      the written model: extended.xml, its own inverse dynamics, rollouts
 //   report_json.cc report.json (causes, metrics, cross-tests) and series.csv
 #pragma once
@@ -78,6 +79,9 @@ struct WrittenParameters {
   Eigen::VectorXd prediction_fit;   // its torques on the fit split (through the parallel filter)
 };
 nlohmann::json written_parameters_json(const WrittenParameters& w);
+
+// "effect@joint" (or "parameters") of every cause rejected in simulation (confirm.cc).
+nlohmann::json rejected_causes(const nlohmann::json& causes);
 
 // The split with its torque columns in `order` (matched by name); throws naming `file` when
 // the names differ.
@@ -155,6 +159,8 @@ class Diagnosis {
   void write_series(const std::string& out_dir, const Eigen::VectorXd& final_pred_fit, const Eigen::VectorXd& final_test) const;
   // written_parameters.cc
   WrittenParameters consistent_parameters() const;
+  // confirm.cc
+  bool confirm_in_simulation(const std::string& ext_path, MjcfEdits& edits);
   // verify.cc
   std::pair<Eigen::VectorXd, Eigen::VectorXd> verify(const std::string& out_dir, MjcfEdits& edits, std::vector<std::string>& notes,
                                                      const Eigen::VectorXd& final_pred_fit);

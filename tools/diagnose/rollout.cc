@@ -31,6 +31,7 @@ RolloutResult rollout(const std::string& mjcf_path, const Split& s, int windows,
     if (qc.back() < 0 || qdc.back() < 0) throw std::runtime_error("split '" + s.name + "' lacks q:/qd:" + name);
   }
   out.position_error.assign(static_cast<size_t>(m->njnt), 0.0);
+  out.window_error.assign(static_cast<size_t>(std::max(windows, 0)), std::vector<double>(static_cast<size_t>(m->njnt), 0.0));
   const Eigen::Index N = s.rows();
   // Rows spanned by one horizon.
   Eigen::Index span = 0;
@@ -67,8 +68,10 @@ RolloutResult rollout(const std::string& mjcf_path, const Split& s, int windows,
     for (int j = 0; j < m->njnt; ++j) {
       const int c = qc[static_cast<size_t>(j)];
       const double qm = (1 - f) * s.X(r, c) + f * s.X(std::min(r + 1, N - 1), c);
-      const double e = std::fabs(d->qpos[m->jnt_qposadr[j]] - qm);
-      out.position_error[static_cast<size_t>(j)] += (std::isfinite(e) ? e : std::numeric_limits<double>::infinity()) / windows;
+      double e = std::fabs(d->qpos[m->jnt_qposadr[j]] - qm);
+      if (!std::isfinite(e)) e = std::numeric_limits<double>::infinity();
+      out.window_error[static_cast<size_t>(w)][static_cast<size_t>(j)] = e;
+      out.position_error[static_cast<size_t>(j)] += e / windows;
     }
   }
   out.windows = windows;

@@ -12,6 +12,7 @@ namespace spml::diagnose_detail {
 struct RolloutResult {
   std::vector<std::string> joints;        // the model's joints
   std::vector<double> position_error;     // per joint: mean |q_sim - q_measured| at the horizon
+  std::vector<std::vector<double>> window_error;   // per window, per joint: |q_sim - q_measured|
   int windows = 0;
   double horizon = 0;                     // seconds
 };
