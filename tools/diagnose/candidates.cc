@@ -124,7 +124,7 @@ BlockColumns Diagnosis::columns(const PluginInstance& inst, const SplitData& s) 
   }
   if (!C.allFinite())
     throw PluginError("plugin '" + std::string(inst.plugin().name) + "' gave non-finite regressor values on split '" + s.name + "'");
-  filter_stacked(s.sos, C, s.N);
+  filter_stacked(s.sos, C, s.N, s.runs);
   return BlockColumns::from_dense(C, s.N, O);
 }
 

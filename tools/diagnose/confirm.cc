@@ -89,13 +89,13 @@ bool Diagnosis::confirm_in_simulation(const std::string& ext_path, MjcfEdits& ed
   };
   bool rejected_any = false;
   try {
-    const RolloutResult before = rollout(opt_.model, test_.split, opt_.rollouts, opt_.rollout_seconds);
-    RolloutResult with = rollout(ext_path, test_.split, opt_.rollouts, opt_.rollout_seconds);
+    const RolloutResult before = rollout(opt_.model, test_.split, opt_.rollouts, opt_.rollout_seconds, test_.runs);
+    RolloutResult with = rollout(ext_path, test_.split, opt_.rollouts, opt_.rollout_seconds, test_.runs);
     std::vector<bool> worse;
     // Writes `trial`; keeps it when its rollouts do better on the worse joints and over all.
     auto better_without = [&](const MjcfEdits& trial, nlohmann::json& record) {
       write(trial);
-      RolloutResult without = rollout(ext_path, test_.split, opt_.rollouts, opt_.rollout_seconds);
+      RolloutResult without = rollout(ext_path, test_.split, opt_.rollouts, opt_.rollout_seconds, test_.runs);
       if (!(relative_total(before, without, &worse) < relative_total(before, with, &worse) &&
             relative_total(before, without) < relative_total(before, with)))
         return false;

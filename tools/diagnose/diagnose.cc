@@ -62,6 +62,7 @@ const char* const kOutputs[] = {"extended.xml", "series.csv", "report.md", "repo
 
 void refuse_inputs_among_outputs(const DiagnoseOptions& o, const fs::path& out) {
   std::vector<std::string> inputs = {o.model, o.data};
+  inputs.insert(inputs.end(), o.more_data.begin(), o.more_data.end());
   inputs.insert(inputs.end(), o.cross.begin(), o.cross.end());
   const fs::path plots = fs::weakly_canonical(out / "plots");
   for (const auto& in : inputs) {

@@ -1,6 +1,7 @@
 // The state one diagnose run carries from stage to stage. Each stage lives in its own file, in
 // the order the data flows:
 //   load.cc        model, dataset, splits (fit / test / cross)
+//   runs.cc        several records of one robot stacked, their boundaries kept
 //   prepare.cc     one split made ready: columns, base regressor, targets, the model's prediction,
 //                  the parallel filter (filtering.cc)
 //   estimate.cc    least-squares refits of the base parameters and causes, residuals on any split
@@ -49,6 +50,7 @@ struct SplitData {
   Eigen::VectorXd b, given, y0;   // targets, prediction of the model as given, b - given
   Eigen::Index N = 0;
   std::vector<Section> sos;       // the parallel filter on this split's time base (empty: none)
+  std::vector<Eigen::Index> runs; // first rows of the records after the first (several --data)
 };
 
 // A candidate cause: one plugin on one joint, with its shape chosen.
@@ -112,12 +114,14 @@ class Diagnosis {
  private:
   // load.cc
   void load();
-  void choose_splits(Split& fit_part, Split& test_part);
+  void choose_splits(const Dataset& ds, const std::string& file, Split& fit_part, Split& test_part);
+  // runs.cc
+  void load_more_records(Split& fit_part, Split& test_part, std::vector<Eigen::Index>& fit_runs, std::vector<Eigen::Index>& test_runs);
   void load_cross();
   void map_outputs();
   void note_frictionloss();
   // prepare.cc
-  SplitData prepare(const Split& s);
+  SplitData prepare(const Split& s, const std::vector<Eigen::Index>& runs = {});
   void plan_parallel_filter();
   void apply_filter(SplitData& d) const;
   // candidates.cc

@@ -192,6 +192,12 @@ void Diagnosis::build_report(const std::string& out_dir) {
   R["format"] = "spml-diagnose/2";
   R["model"] = opt_.model;
   R["data"] = opt_.data;
+  if (!opt_.more_data.empty()) {
+    nlohmann::json runs = {opt_.data};
+    for (const auto& f : opt_.more_data) runs.push_back(f);
+    R["data_runs"] = runs;
+    R["rows_per_run"] = {{"fit_starts", fit_.runs}, {"test_starts", test_.runs}};
+  }
   R["fit_split"] = opt_.fit_split;
   R["test_split"] = test_name_;
   R["joints"] = out_joints_;

@@ -21,6 +21,7 @@ struct RolloutResult {
 // q:/qd:/tau:<joint> columns), each `horizon` seconds long, with contacts off (inverse
 // dynamics has none either) and the model's force plugins attached. Joints without a tau:
 // column get no applied torque.
-RolloutResult rollout(const std::string& mjcf_path, const Split& s, int windows, double horizon);
+// `runs`: first rows of the records after the first (several --data): no window spans a junction.
+RolloutResult rollout(const std::string& mjcf_path, const Split& s, int windows, double horizon, const std::vector<Eigen::Index>& runs = {});
 
 }  // namespace spml::diagnose_detail

@@ -15,7 +15,7 @@ namespace spml::diagnose_detail {
 Eigen::VectorXd Diagnosis::written_prediction(const MjcfRegressor& ext, const MjcfRegressor::Base& ebase, const SplitData& s) const {
   const JointColumns cols(ext, s.split);
   Eigen::VectorXd pred = stacked_base_regressor(ext, ebase, s.split.X, cols, s.name) * ebase.model_values;
-  filter_stacked(s.sos, pred, s.N);
+  filter_stacked(s.sos, pred, s.N, s.runs);
   return pred;
 }
 
@@ -112,8 +112,8 @@ void Diagnosis::run_rollouts(const std::string& ext_path, std::vector<std::strin
   nlohmann::json& R = result_.report;
   if (opt_.rollouts <= 0) return;
   try {
-    const RolloutResult before = rollout(opt_.model, test_.split, opt_.rollouts, opt_.rollout_seconds);
-    const RolloutResult after = rollout(ext_path, test_.split, opt_.rollouts, opt_.rollout_seconds);
+    const RolloutResult before = rollout(opt_.model, test_.split, opt_.rollouts, opt_.rollout_seconds, test_.runs);
+    const RolloutResult after = rollout(ext_path, test_.split, opt_.rollouts, opt_.rollout_seconds, test_.runs);
     nlohmann::json b = nlohmann::json::object(), a = nlohmann::json::object(), worse = nlohmann::json::array();
     for (size_t j = 0; j < before.joints.size(); ++j) {
       b[before.joints[j]] = before.position_error[j];

@@ -13,7 +13,7 @@ namespace spml::diagnose_detail {
 
 WrittenParameters Diagnosis::consistent_parameters() const {
   Eigen::MatrixXd W = stacked_standard_regressor(*reg_, fit_.split.X, *fit_.cols, opt_.data + ": split " + fit_.name);
-  filter_stacked(fit_.sos, W, fit_.N);
+  filter_stacked(fit_.sos, W, fit_.N, fit_.runs);
   const std::vector<int> effects = kept_effects();
   Eigen::Index ne = 0;
   for (int k : effects) ne += cands_[static_cast<size_t>(k)].fit_cols.cols;

@@ -34,6 +34,9 @@ namespace spml {
 struct DiagnoseOptions {
   std::string model;        // MJCF file
   std::string data;         // spml/1 dataset (q:/qd:/qdd:/tau:<joint> columns)
+  // Further records of the same robot (--data repeated): fitted together with `data`, each
+  // record's test part held out; filters and rollouts stay within each record.
+  std::vector<std::string> more_data;
   std::string fit_split = "train";
   std::string test_split;   // "" = the first other split, or a time-ordered hold-out
   double holdout = 0.3;     // fraction held out (the last rows) when the dataset has one split
