@@ -6,9 +6,8 @@
 // of the written model one at a time, the last chosen first; a cause goes (rejected, with both
 // rollout errors in report.json) when the model without it does better on those joints and,
 // over all joints, in rollout error relative to the model as given.
+#include <algorithm>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 
 #include "diagnosis.h"
 #include "rollout.h"
@@ -76,6 +75,18 @@ nlohmann::json rejected_causes(const nlohmann::json& causes) {
     for (const auto& [joint, r] : c.value("rejected_joint_terms", nlohmann::json::object()).items()) out.push_back("parameters@" + joint);
   }
   return out;
+}
+
+// After rejections: parameters_written follows what is left, and a note says what went.
+void Diagnosis::note_rejections(const MjcfEdits& edits, std::vector<std::string>& notes) {
+  nlohmann::json& R = result_.report;
+  const nlohmann::json rejected = rejected_causes(R["causes"]);
+  if (edits.joint_attributes.empty() && edits.inertials.empty())
+    R["parameters_written"] = "none";
+  else if (rejected.dump().find("parameters@") != std::string::npos)
+    R["parameters_written"] = "partial";
+  notes.push_back("rejected in simulation (causes[].rejected): " + rejected.dump() + " made the rollouts of the written model worse "
+                  "beyond their noise on their joints; extended.xml leaves them out, and `final` and extended_check are of the model without them");
 }
 
 // Returns true when a cause (or a joint's part of `parameters`) was rejected; edits and the file

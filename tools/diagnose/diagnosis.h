@@ -165,6 +165,7 @@ class Diagnosis {
   WrittenParameters consistent_parameters() const;
   // confirm.cc
   bool confirm_in_simulation(const std::string& ext_path, MjcfEdits& edits);
+  void note_rejections(const MjcfEdits& edits, std::vector<std::string>& notes);
   // verify.cc
   std::pair<Eigen::VectorXd, Eigen::VectorXd> verify(const std::string& out_dir, MjcfEdits& edits, std::vector<std::string>& notes,
                                                      const Eigen::VectorXd& final_pred_fit);

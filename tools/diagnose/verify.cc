@@ -78,13 +78,7 @@ std::pair<Eigen::VectorXd, Eigen::VectorXd> Diagnosis::verify(const std::string&
   if (confirm_in_simulation(ext_path.string(), edits)) {
     std::vector<std::string> again;   // the same edit notes as before, not repeated
     written = write_and_score(edits, again);
-    const nlohmann::json rejected = rejected_causes(R["causes"]);
-    if (edits.joint_attributes.empty() && edits.inertials.empty())
-      R["parameters_written"] = "none";
-    else if (rejected.dump().find("parameters@") != std::string::npos)
-      R["parameters_written"] = "partial";
-    notes.push_back("rejected in simulation (causes[].rejected): " + rejected.dump() + " made the rollouts of the written model worse "
-                    "beyond their noise on their joints; extended.xml leaves them out, and `final` and extended_check are of the model without them");
+    note_rejections(edits, notes);
   }
   R["extended_mjcf"] = out_dir.empty() ? "" : "extended.xml";
   {
