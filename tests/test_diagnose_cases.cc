@@ -8,7 +8,7 @@
 
 #include "diagnose_draws.h"
 #include "diagnosis.h"
-#include "extended_mjcf.h"
+#include "spml/envs/mjcf_edit.h"
 #include "spml/diagnose.h"
 #include "spml/envs/mujoco_model.h"
 #include "test_util.h"
@@ -125,12 +125,12 @@ TEST(DiagnoseCases, ExtendedModelOfUnusualLegalMjcfLoads) {
                           "      <body name=\"c\" pos=\"0.3 0 0\"><joint name=\"joint2\" type=\"hinge\"/><geom size=\"0.1\" mass=\"1\"/></body>\n"
                           "    </body>\n  </worldbody>\n  <equality><joint name=\"joint1\" joint1=\"joint1\" joint2=\"joint2\"/></equality>\n"
                           "  <custom><text name=\"spml.plugin.diagnosed_coulomb_joint1\" data=\"type=coulomb joints=joint1 fc=0.1\"/></custom>\n</mujoco>\n";
-  diagnose_detail::MjcfEdits e;
+  MjcfEdits e;
   e.joint_attributes["joint1"]["damping"] = 0.5;
   e.texts.emplace_back("spml.plugin.diagnosed_coulomb_joint1", "type=coulomb joints=joint1 fc=0.2");
   e.comment = "from data/a-->b<x>.h5 -- test";
   std::vector<std::string> notes;
-  const std::string out = diagnose_detail::write_extended_mjcf(model, e, notes);
+  const std::string out = edit_mjcf(model, e, notes);
   EXPECT_EQ(out.rfind("<?xml", 0), 0u) << out;                               // the declaration stays first
   EXPECT_EQ(out.find("-->b<x>"), std::string::npos) << out;                  // no markup from the comment
   EXPECT_NE(out.find("spml.plugin.diagnosed_coulomb_joint1_2"), std::string::npos) << out;   // no repeated name
@@ -217,6 +217,76 @@ TEST(DiagnoseCases, NoiseFreeExactDataGetNoCause) {
   o.rollouts = 0;
   const auto r = diagnose(o, "").report;
   EXPECT_TRUE(r["causes"].empty()) << r["causes"].dump(1);
+}
+
+}  // namespace
+}  // namespace spml
+
+namespace spml {
+namespace {
+
+// The parallel filter runs within each record: a step at the junction of two stacked records
+// stays a step (filtered across it, it would be smeared over the filter's response).
+TEST(DiagnoseCases, FilterStaysWithinRecords) {
+  const auto sos = butterworth_lowpass(4, 5, 200);
+  Eigen::VectorXd b(400);
+  b.head(100).setConstant(1.0);
+  b.segment(100, 100).setConstant(-1.0);   // output 0: records of 100 rows each
+  b.segment(200, 100).setConstant(2.0);
+  b.tail(100).setConstant(3.0);            // output 1
+  Eigen::VectorXd within = b, across = b;
+  diagnose_detail::filter_stacked(sos, within, 200, {100});
+  diagnose_detail::filter_stacked(sos, across, 200);
+  EXPECT_LT((within - b).cwiseAbs().maxCoeff(), 1e-6);
+  EXPECT_GT((across - b).cwiseAbs().maxCoeff(), 0.1);
+}
+
+// Several records of one robot (--data repeated): fitted together, each record's test part held
+// out, rollouts within records. Two runs of a chain with Coulomb friction on j1, each of 600
+// rows: the fit split holds both fit parts, the effect is found, and the command names the
+// record whose columns differ.
+TEST(DiagnoseCases, SeveralRecordsAreFittedTogether) {
+  const auto dir = test::temp_dir("dc-runs");
+  std::mt19937_64 rng(11);
+  const std::string user = test::random_chain(rng, 2, 0);
+  const std::string user_path = (dir / "user.xml").string(), true_path = (dir / "true.xml").string();
+  std::ofstream(user_path) << user;
+  std::ofstream(true_path) << test::with_declarations(user, {"type=coulomb joints=j1 fc=0.5"});
+  const std::vector<std::string> joints{"j0", "j1"};
+  const std::string a = (dir / "a.h5").string(), b = (dir / "b.h5").string();
+  write_dataset(a, test::exact_dataset(true_path, joints, 600, 1e-3, 5));
+  write_dataset(b, test::exact_dataset(true_path, joints, 600, 1e-3, 6));
+  DiagnoseOptions o;
+  o.model = user_path;
+  o.data = a;
+  o.more_data = {b};
+  o.rollouts = 6;
+  const auto r = diagnose(o, "").report;
+  EXPECT_EQ(r["rows"]["fit"].get<int>(), 2 * 420);
+  EXPECT_EQ(r["rows"]["test"].get<int>(), 2 * 180);
+  EXPECT_EQ(r["data_runs"].size(), 2u);
+  EXPECT_EQ(r["rows_per_run"]["fit_starts"][0].get<int>(), 420);
+  std::set<std::string> named;
+  for (const auto& c : r["causes"])
+    if (!c.contains("superseded_by")) named.insert(c["effect"].get<std::string>() + "@" + c["joints"][0].get<std::string>());
+  EXPECT_EQ(named, std::set<std::string>{"coulomb@j1"}) << r["causes"].dump(1);
+  ASSERT_TRUE(r["rollout"].contains("windows")) << r["rollout"].dump();
+  EXPECT_EQ(r["rollout"]["windows"].get<int>(), 6);
+  // A record whose joints differ is refused, naming it.
+  Dataset other = test::exact_dataset(true_path, joints, 600, 1e-3, 7);
+  for (auto& s : other.splits)
+    for (auto& n : s.x_columns)
+      if (n == "qdd:j1") n = "qdd:jx";
+  const std::string c = (dir / "c.h5").string();
+  write_dataset(c, other);
+  o.more_data = {c};
+  try {
+    diagnose(o, "");
+    FAIL() << "a record without qdd:j1 accepted";
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find(c), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("qdd:j1"), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace

@@ -124,7 +124,7 @@ BlockColumns Diagnosis::columns(const PluginInstance& inst, const SplitData& s) 
   }
   if (!C.allFinite())
     throw PluginError("plugin '" + std::string(inst.plugin().name) + "' gave non-finite regressor values on split '" + s.name + "'");
-  filter_stacked(s.sos, C, s.N);
+  filter_stacked(s.sos, C, s.N, s.runs);
   return BlockColumns::from_dense(C, s.N, O);
 }
 
@@ -136,6 +136,13 @@ BlockColumns Diagnosis::columns_of(const Candidate& c, const SplitData& s) const
 
 std::string Diagnosis::refused(int candidate, const Eigen::VectorXd& theta) const {
   const Candidate& c = cands_[static_cast<size_t>(candidate)];
+  // A Stribeck curve falls from its break-away level fs to the Coulomb level fc. Fitted with
+  // fs < fc it is friction lower at low speed: the stick phases of Coulomb friction (the joint
+  // held while the applied torque is below fc, read through estimated velocities), not Stribeck.
+  if (std::string(c.plugin->name) == "stribeck")
+    for (Eigen::Index k = 0; k + 1 < theta.size(); k += 2)
+      if (!(theta[k + 1] >= theta[k]))
+        return "fs " + fmt(theta[k + 1]) + " < fc " + fmt(theta[k]) + ": not a Stribeck curve (friction lower at low speed: stick phases)";
   try {
     PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
     inst.set_params(theta);

@@ -1,12 +1,15 @@
 // The state one diagnose run carries from stage to stage. Each stage lives in its own file, in
 // the order the data flows:
 //   load.cc        model, dataset, splits (fit / test / cross)
+//   runs.cc        several records of one robot stacked, their boundaries kept
 //   prepare.cc     one split made ready: columns, base regressor, targets, the model's prediction,
 //                  the parallel filter (filtering.cc)
 //   estimate.cc    least-squares refits of the base parameters and causes, residuals on any split
 //   candidates.cc  the force plugins as candidate causes, and their regressor columns
 //   shape_search.cc  the shape of one candidate (grid, zoom, plateau middle, local polish)
 //   selection.cc   forward selection, backward elimination, the `parameters` decision
+//   written_parameters.cc  the physically consistent parameters extended.xml states
+//   confirm.cc     causes whose written form makes rollouts worse beyond noise are rejected
 //   verify.cc      the written model: extended.xml, its own inverse dynamics, rollouts
 //   report_json.cc report.json (causes, metrics, cross-tests) and series.csv
 #pragma once
@@ -15,15 +18,17 @@
 #include <chrono>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <set>
 #include <string>
 #include <utility>
 #include <vector>
 
 #include "design.h"
-#include "extended_mjcf.h"
+#include "spml/envs/mjcf_edit.h"
 #include "filtering.h"
 #include "spml/diagnose.h"
+#include "spml/envs/consistent_identification.h"
 #include "spml/envs/mjcf_regressor.h"
 #include "spml/force_effects.h"
 
@@ -46,6 +51,7 @@ struct SplitData {
   Eigen::VectorXd friction;       // MuJoCo's frictionloss torque - the regressor's fl*sign(qd), stacked (in given; empty: none)
   Eigen::Index N = 0;
   std::vector<Section> sos;       // the parallel filter on this split's time base (empty: none)
+  std::vector<Eigen::Index> runs; // first rows of the records after the first (several --data)
 };
 
 // A candidate cause: one plugin on one joint, with its shape chosen.
@@ -69,6 +75,16 @@ struct Cause {
   double delta_bic;
   std::string superseded_by;
 };
+
+// The parameters extended.xml states when `parameters` is named (written_parameters.cc).
+struct WrittenParameters {
+  ConsistentIdentification id;      // standard parameters; id.extra: the kept effects' coefficients
+  Eigen::VectorXd prediction_fit;   // its torques on the fit split (through the parallel filter)
+};
+nlohmann::json written_parameters_json(const WrittenParameters& w);
+
+// "effect@joint" (or "parameters") of every cause rejected in simulation (confirm.cc).
+nlohmann::json rejected_causes(const nlohmann::json& causes);
 
 // The split with its torque columns in `order` (matched by name); throws naming `file` when
 // the names differ.
@@ -99,13 +115,15 @@ class Diagnosis {
  private:
   // load.cc
   void load();
-  void choose_splits(Split& fit_part, Split& test_part);
+  void choose_splits(const Dataset& ds, const std::string& file, Split& fit_part, Split& test_part);
+  // runs.cc
+  void load_more_records(Split& fit_part, Split& test_part, std::vector<Eigen::Index>& fit_runs, std::vector<Eigen::Index>& test_runs);
   void load_cross();
   void map_outputs();
   void note_frictionloss();
   Eigen::VectorXd frictionloss_correction(const SplitData& d) const;
   // prepare.cc
-  SplitData prepare(const Split& s);
+  SplitData prepare(const Split& s, const std::vector<Eigen::Index>& runs = {});
   void plan_parallel_filter();
   void apply_filter(SplitData& d) const;
   // candidates.cc
@@ -141,12 +159,15 @@ class Diagnosis {
   nlohmann::json cross_errors(const std::vector<int>& causes, bool base_free, const Fit& f) const;
   void build_report(const std::string& out_dir);
   nlohmann::json parameters_cause(const Fit& final_fit, MjcfEdits& edits, std::vector<std::string>& notes) const;
-  void parameter_edits(const Eigen::VectorXd& pi, MjcfEdits& edits, std::vector<std::string>& notes) const;
-  void inertial_edit(const Eigen::VectorXd& pi, const std::string& body, MjcfEdits& edits, std::vector<std::string>& notes) const;
   nlohmann::json effect_cause(size_t i, const Fit& final_fit, bool free, MjcfEdits& edits, std::vector<std::string>& notes,
                               nlohmann::json& cross_after) const;
   nlohmann::json cross_report(const Fit& final_fit, bool free, const nlohmann::json& cross_after) const;
   void write_series(const std::string& out_dir, const Eigen::VectorXd& final_pred_fit, const Eigen::VectorXd& final_test) const;
+  // written_parameters.cc
+  WrittenParameters consistent_parameters() const;
+  // confirm.cc
+  bool confirm_in_simulation(const std::string& ext_path, MjcfEdits& edits);
+  void note_rejections(const MjcfEdits& edits, std::vector<std::string>& notes);
   // verify.cc
   std::pair<Eigen::VectorXd, Eigen::VectorXd> verify(const std::string& out_dir, MjcfEdits& edits, std::vector<std::string>& notes,
                                                      const Eigen::VectorXd& final_pred_fit);
@@ -170,7 +191,8 @@ class Diagnosis {
   bool parameters_named_ = false;
   double parameters_delta_bic_ = 0, parameters_n_eff_ = 0;
   int parameters_contradicted_ = 0;
-  mutable bool parameters_partial_ = false;   // some re-identified inertial could not be written   // base parameters beyond 3 robust standard errors
+  mutable bool parameters_partial_ = false;   // some re-identified parameter has no MJCF attribute written
+  std::optional<WrittenParameters> written_;  // set in build_report when `parameters` is named
   std::vector<std::string> notes_;
   FilterPlan filter_plan_;
 };

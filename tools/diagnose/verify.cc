@@ -15,7 +15,7 @@ namespace spml::diagnose_detail {
 Eigen::VectorXd Diagnosis::written_prediction(const MjcfRegressor& ext, const MjcfRegressor::Base& ebase, const SplitData& s) const {
   const JointColumns cols(ext, s.split);
   Eigen::VectorXd pred = stacked_base_regressor(ext, ebase, s.split.X, cols, s.name) * ebase.model_values;
-  filter_stacked(s.sos, pred, s.N);
+  filter_stacked(s.sos, pred, s.N, s.runs);
   if (s.friction.size()) pred += s.friction;   // MuJoCo's frictionloss, as in `given` (load.cc)
   return pred;
 }
@@ -33,8 +33,17 @@ std::pair<Eigen::VectorXd, Eigen::VectorXd> Diagnosis::verify(const std::string&
                                             : fs::path(out_dir) / "extended.xml";
   if (!out_dir.empty()) fs::create_directories(out_dir);
   // Writes one version of the model and returns its predictions on the fit and test splits.
-  auto write_and_score = [&](const MjcfEdits& e, std::vector<std::string>& n) {
-    result_.extended_mjcf = write_extended_mjcf(opt_.model, e, n);
+  auto write_and_score = [&](MjcfEdits& e, std::vector<std::string>& n) {
+    try {
+      result_.extended_mjcf = edit_mjcf(opt_.model, e, n);
+    } catch (const std::runtime_error& err) {
+      if (e.inertials.empty()) throw;
+      // A compiler setting that would override written inertials (inertiafromgeom, settotalmass).
+      e.inertials.clear();
+      n.push_back(std::string(err.what()) + ": the re-identified inertials are not written");
+      parameters_partial_ = true;
+      result_.extended_mjcf = edit_mjcf(opt_.model, e, n);
+    }
     write_text_atomic(ext_path.string(), result_.extended_mjcf);
     MjcfRegressor ext(ext_path.string());
     const auto ebase = ext.base_parameters();
@@ -55,6 +64,7 @@ std::pair<Eigen::VectorXd, Eigen::VectorXd> Diagnosis::verify(const std::string&
     const double rss_all = (fit_.b - written.first).squaredNorm(), rss_none = (fit_.b - none.first).squaredNorm();
     if (rss_none < rss_all) {
       written = std::move(none);
+      edits = effects_only;
       notes_all = notes_none;
       R["parameters_written"] = "none";
       notes_all.push_back("the re-identified parameters could be written only in part (inertials refused), and that version fits the fit "
@@ -66,6 +76,11 @@ std::pair<Eigen::VectorXd, Eigen::VectorXd> Diagnosis::verify(const std::string&
     }
   }
   notes = notes_all;
+  if (confirm_in_simulation(ext_path.string(), edits)) {
+    std::vector<std::string> again;   // the same edit notes as before, not repeated
+    written = write_and_score(edits, again);
+    note_rejections(edits, notes);
+  }
   R["extended_mjcf"] = out_dir.empty() ? "" : "extended.xml";
   {
     R["extended_check"] = {{"max_abs_deviation", (written.first - final_pred_fit).cwiseAbs().maxCoeff()},
@@ -92,16 +107,17 @@ void Diagnosis::run_rollouts(const std::string& ext_path, std::vector<std::strin
   nlohmann::json& R = result_.report;
   if (opt_.rollouts <= 0) return;
   try {
-    const RolloutResult before = rollout(opt_.model, test_.split, opt_.rollouts, opt_.rollout_seconds);
-    const RolloutResult after = rollout(ext_path, test_.split, opt_.rollouts, opt_.rollout_seconds);
+    const RolloutResult before = rollout(opt_.model, test_.split, opt_.rollouts, opt_.rollout_seconds, test_.runs);
+    const RolloutResult after = rollout(ext_path, test_.split, opt_.rollouts, opt_.rollout_seconds, test_.runs);
     nlohmann::json b = nlohmann::json::object(), a = nlohmann::json::object(), worse = nlohmann::json::array();
     for (size_t j = 0; j < before.joints.size(); ++j) {
       b[before.joints[j]] = before.position_error[j];
       a[after.joints[j]] = after.position_error[j];
       if (!(after.position_error[j] <= before.position_error[j])) worse.push_back(before.joints[j]);
     }
+    const nlohmann::json rejected = rejected_causes(R["causes"]);
     R["rollout"] = {{"split", test_name_}, {"horizon_s", opt_.rollout_seconds}, {"windows", before.windows},
-                    {"position_error_before", b}, {"position_error_after", a}, {"worse_on", worse}};
+                    {"position_error_before", b}, {"position_error_after", a}, {"worse_on", worse}, {"rejected", rejected}};
     if (!worse.empty())
       notes.push_back("rollouts of extended.xml end farther from the measured positions than the model as given on " + worse.dump() +
                       " (rollout.worse_on): the causes on those joints are not confirmed in simulation");
