@@ -9,10 +9,13 @@
 //   selection.cc   forward selection, backward elimination, the `parameters` decision
 //   verify.cc      the written model: extended.xml, its own inverse dynamics, rollouts
 //   report_json.cc report.json (causes, metrics, cross-tests) and series.csv
+// Issue #22 (stages of their own, hooked in where marked "#22"):
+//   delay.cc       an offset between torques and states, estimated and corrected first
 #pragma once
 
 #include <Eigen/Core>
 #include <chrono>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <set>
@@ -61,6 +64,14 @@ struct Candidate {
   bool skipped = false;           // its plugin failed (non-finite columns): not a candidate
   Gain gain;
   double delta_bic = -std::numeric_limits<double>::infinity();
+};
+
+// #22: the offset between torques and states (delay.cc).
+struct DelayResult {
+  double seconds = 0, stderr_ = std::numeric_limits<double>::infinity(), delta_bic = 0, range = 0;
+  bool named = false;
+  std::string why;
+  Eigen::VectorXd y0_fit, y0_test;   // the fit and test targets before the correction (baseline)
 };
 
 struct Cause {
@@ -145,6 +156,14 @@ class Diagnosis {
                               nlohmann::json& cross_after) const;
   nlohmann::json cross_report(const Fit& final_fit, bool free, const nlohmann::json& cross_after) const;
   void write_series(const std::string& out_dir, const Eigen::VectorXd& final_pred_fit, const Eigen::VectorXd& final_test) const;
+  // delay.cc (#22)
+  void estimate_delay();
+  void delay_decide(double d, const std::function<Eigen::VectorXd(double)>& projected, int rank);
+  double uniform_step(const SplitData& s) const;
+  Eigen::VectorXd targets_at(const SplitData& s, double d) const;
+  BlockColumns coulomb_nuisance(const SplitData& s) const;
+  nlohmann::json delay_report() const;
+  nlohmann::json delay_cause() const;
   // verify.cc
   std::pair<Eigen::VectorXd, Eigen::VectorXd> verify(const std::string& out_dir, MjcfEdits& edits, std::vector<std::string>& notes,
                                                      const Eigen::VectorXd& final_pred_fit);
@@ -171,6 +190,7 @@ class Diagnosis {
   mutable bool parameters_partial_ = false;   // some re-identified inertial could not be written   // base parameters beyond 3 robust standard errors
   std::vector<std::string> notes_;
   FilterPlan filter_plan_;
+  DelayResult delay_;   // #22
 };
 
 }  // namespace spml::diagnose_detail

@@ -248,7 +248,7 @@ nlohmann::json Diagnosis::cross_report(const Fit& final_fit, bool free, const nl
 void Diagnosis::build_report(const std::string& out_dir) {
   auto t0 = Clock::now();
   nlohmann::json& R = result_.report;
-  R["format"] = "spml-diagnose/2";
+  R["format"] = "spml-diagnose/3";   // #22: /3 adds delay, unexplained (README)
   R["model"] = opt_.model;
   R["data"] = opt_.data;
   R["fit_split"] = opt_.fit_split;
@@ -260,7 +260,9 @@ void Diagnosis::build_report(const std::string& out_dir) {
   R["base_parameters"] = {{"standard", reg_->param_names().size()}, {"rank", base_.rank},
                           {"tolerance", base_.tolerance}, {"smallest_kept", base_.smallest_kept},
                           {"largest_dropped", base_.largest_dropped}, {"close_call", base_.close_call()}};
-  R["baseline"] = metrics(fit_.y0, test_.y0);
+  // #22: the baseline is the data as measured, before a delay correction (delay.cc).
+  R["baseline"] = delay_.named ? metrics(delay_.y0_fit, delay_.y0_test) : metrics(fit_.y0, test_.y0);
+  R["delay"] = delay_report();
   R["parallel_filter"] = {{"source", filter_plan_.source == FilterPlan::Source::recorded   ? "recorded"
                                      : filter_plan_.source == FilterPlan::Source::detected ? "detected"
                                                                                            : "none"},
@@ -276,6 +278,10 @@ void Diagnosis::build_report(const std::string& out_dir) {
   nlohmann::json causes = nlohmann::json::array(), cross_after = nlohmann::json::array();
   MjcfEdits edits;
   std::vector<std::string> notes = notes_;
+  if (delay_.named) {   // #22: the delay comes first, it was corrected before everything else
+    causes.push_back(delay_cause());
+    cross_after.push_back(cross_errors({}, false, Fit{}));
+  }
   if (free) {
     causes.push_back(parameters_cause(final_fit, edits, notes));
     cross_after.push_back(cross_errors({}, true, refit({}, true)));

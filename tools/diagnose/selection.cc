@@ -63,6 +63,9 @@ void Diagnosis::score_candidates(const Fit& current, const std::vector<int>& cho
 // Forward: at each step the first of the best six candidates whose fitted parameters the
 // plugin accepts and which gains on the test split joins.
 void Diagnosis::select() {
+  auto t_delay = Clock::now();
+  estimate_delay();   // #22: a delay is corrected before any other cause is estimated (delay.cc)
+  result_.timings.search += since(t_delay);
   std::vector<int> chosen;
   std::set<int> research;   // joints whose candidates need a new shape search
   for (size_t j = 0; j < still_.size(); ++j) research.insert(static_cast<int>(j));
