@@ -11,10 +11,14 @@
 //   report_json.cc report.json (causes, metrics, cross-tests) and series.csv
 // Issue #22 (stages of their own, hooked in where marked "#22"):
 //   delay.cc       an offset between torques and states, estimated and corrected first
+//   stateful_fit.cc  stateful plugins (LuGre stick_slip) fitted by simulation along the log
+//   unexplained.cc the GP (ARD) on the final residual: structure no candidate explains
 #pragma once
 
 #include <Eigen/Core>
 #include <chrono>
+#include <deque>
+#include <sstream>
 #include <functional>
 #include <limits>
 #include <memory>
@@ -64,7 +68,14 @@ struct Candidate {
   bool skipped = false;           // its plugin failed (non-finite columns): not a candidate
   Gain gain;
   double delta_bic = -std::numeric_limits<double>::infinity();
+  // #22: a stateful plugin fitted by simulation (stateful_fit.cc): every key is a shape value,
+  // fit_cols is its simulated force (one column).
+  bool stateful = false;
+  std::vector<double> stateful_se;            // per shape key, absolute
+  std::vector<std::string> not_identifiable;  // keys with a relative standard error above 50 %
 };
+
+bool is_stateful(const spml_force_plugin& p);   // #22: advance/reset and no regressor
 
 // #22: the offset between torques and states (delay.cc).
 struct DelayResult {
@@ -164,6 +175,17 @@ class Diagnosis {
   BlockColumns coulomb_nuisance(const SplitData& s) const;
   nlohmann::json delay_report() const;
   nlohmann::json delay_cause() const;
+  // stateful_fit.cc (#22)
+  void add_stateful_candidates(const spml_force_plugin& p);
+  BlockColumns simulated_columns(const PluginInstance& inst, const SplitData& s) const;
+  double stateful_drop(const Candidate& c, const Fit& current, const std::vector<double>& x, Eigen::VectorXd* force = nullptr) const;
+  void fit_stateful(Candidate& c, const Fit& current);
+  void stateful_errors(Candidate& c, const Fit& current, const std::vector<double>& x);
+  void stateful_report(const Candidate& c, double amplitude, nlohmann::json& params, nlohmann::json& se, nlohmann::json& j) const;
+  Eigen::VectorXd written_stateful(const SplitData& s) const;
+  // unexplained.cc (#22)
+  nlohmann::json unexplained_joint(size_t o, const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test, std::ostringstream& csv) const;
+  nlohmann::json unexplained(const std::string& out_dir, const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test) const;
   // verify.cc
   std::pair<Eigen::VectorXd, Eigen::VectorXd> verify(const std::string& out_dir, MjcfEdits& edits, std::vector<std::string>& notes,
                                                      const Eigen::VectorXd& final_pred_fit);
@@ -191,6 +213,8 @@ class Diagnosis {
   std::vector<std::string> notes_;
   FilterPlan filter_plan_;
   DelayResult delay_;   // #22
+  mutable std::shared_ptr<mjData> sim_data_;   // #22: the state the stateful simulations read (one thread)
+  std::deque<spml_shape_param> synthesized_;   // #22: the level keys of stateful plugins, searched as shapes
 };
 
 }  // namespace spml::diagnose_detail

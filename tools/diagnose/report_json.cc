@@ -203,17 +203,23 @@ nlohmann::json Diagnosis::effect_cause(size_t i, const Fit& final_fit, bool free
   PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
   const auto pnames = inst.param_names();
   nlohmann::json params = nlohmann::json::object(), se = nlohmann::json::object(), shape = nlohmann::json::object();
-  Eigen::VectorXd theta(inst.nparam());
-  for (int k = 0; k < inst.nparam(); ++k) {
-    theta[k] = src.determined[static_cast<size_t>(off + k)] ? src.coef[off + k] : 0.0;
-    params[pnames[static_cast<size_t>(k)]] = theta[k];
-    se[pnames[static_cast<size_t>(k)]] = src.stderr_[off + k];
+  nlohmann::json stateful_extra = nlohmann::json::object();
+  if (c.stateful) {   // #22: every key fitted by simulation (stateful_fit.cc); written as fitted
+    stateful_report(c, src.coef[off], params, se, stateful_extra);
+  } else {
+    Eigen::VectorXd theta(inst.nparam());
+    for (int k = 0; k < inst.nparam(); ++k) {
+      theta[k] = src.determined[static_cast<size_t>(off + k)] ? src.coef[off + k] : 0.0;
+      params[pnames[static_cast<size_t>(k)]] = theta[k];
+      se[pnames[static_cast<size_t>(k)]] = src.stderr_[off + k];
+    }
+    for (size_t k = 0; k < c.shape.size(); ++k) shape[c.shape[k]->key] = c.shape_values[k];
+    inst.set_params(theta);
   }
-  for (size_t k = 0; k < c.shape.size(); ++k) shape[c.shape[k]->key] = c.shape_values[k];
-  inst.set_params(theta);
   const std::string config = inst.config_text();
   nlohmann::json j{{"effect", c.plugin->name}, {"joints", {c.joint_name}}, {"params", params}, {"stderr", se}, {"shape", shape},
                    {"delta_bic", cause.delta_bic}};
+  j.update(stateful_extra);
   put_after(j, after);
   if (!kept) j["superseded_by"] = cause.superseded_by;
   if (kept) {
@@ -290,6 +296,7 @@ void Diagnosis::build_report(const std::string& out_dir) {
   R["causes"] = causes;
   // The fit's own prediction; `final` is set by verify() from the written model itself.
   R["final_internal"] = metrics(final_fit.residual, final_test);
+  R["unexplained"] = unexplained(out_dir, final_fit.residual, final_test);   // #22 (unexplained.cc)
   if (!cross_.empty()) R["cross"] = cross_report(final_fit, free, cross_after);
   nlohmann::json still = nlohmann::json::array();
   for (size_t j = 0; j < still_.size(); ++j)

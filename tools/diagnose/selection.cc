@@ -38,7 +38,9 @@ void Diagnosis::score_candidates(const Fit& current, const std::vector<int>& cho
     Candidate& c = cands_[k];
     if (c.skipped) continue;
     try {
-      if (!c.searched || (!c.shape.empty() && research.count(c.joint)))
+      if (c.stateful && !c.searched)   // #22: fitted once by simulation, against the residual before other causes on its joint
+        fit_stateful(c, current);
+      else if (!c.stateful && (!c.searched || (!c.shape.empty() && research.count(c.joint))))
         search_shape(c, current);
       else
         c.gain = gain_of(c.fit_cols, current.Q, current.residual);

@@ -16,6 +16,7 @@ Eigen::VectorXd Diagnosis::written_prediction(const MjcfRegressor& ext, const Mj
   const JointColumns cols(ext, s.split);
   Eigen::VectorXd pred = stacked_base_regressor(ext, ebase, s.split.X, cols, s.name) * ebase.model_values;
   filter_stacked(s.sos, pred, s.N);
+  pred += written_stateful(s);   // #22: stateful plugins are no regressor columns: simulated as declared
   return pred;
 }
 
