@@ -1,13 +1,13 @@
 // Issue #22 item 2, signal delay: torque and state logs that come from different
 // buses or filters are offset in time by a few milliseconds, and every friction estimate made
-// on them is poisoned. The offset is a shape parameter of the base fit: the torques are
-// resampled at t + d (cubic Hermite interpolation on the uniform grid, so d is resolved far
+// on them is poisoned. The offset is a shape parameter of the base fit: the model's columns
+// are evaluated at t - d (cubic Hermite interpolation on the uniform grid, so d is resolved far
 // below the sample period), the MJCF's base parameters and a Coulomb level per joint are
-// refitted (variable projection), and d minimises the residual sum of squares - a grid, then a
-// bounded local search (NLopt). It is named cause `delay` when the evidence (effective sample
-// size) and the held-out test pass, and then corrected in every split before any other cause
-// is estimated. Its standard error is the Gauss-Newton one with the autocorrelation-robust
-// long-run variance (statistics.h).
+// refitted for each d (variable projection), and d minimises the residual sum of squares - a
+// grid, then a bounded local search (NLopt). It is named cause `delay` when the evidence
+// (effective sample size) and the held-out test pass, and then corrected in every split (the
+// torques resampled at t + d) before any other cause is estimated. Its standard error is the
+// Gauss-Newton one with the autocorrelation-robust long-run variance (statistics.h).
 #include <nlopt.hpp>
 
 #include <algorithm>
@@ -58,6 +58,14 @@ Eigen::MatrixXd shifted_columns(const Eigen::MatrixXd& Y, double d, double h) {
   return out;
 }
 
+// A block's columns evaluated at t - d (each output's rows shifted alike).
+BlockColumns shifted_block(const BlockColumns& B, double d, double h) {
+  BlockColumns out = B;
+  for (auto& part : out.parts)
+    for (Eigen::Index c = 0; c < part.cols(); ++c) part.col(c) = shifted(Eigen::VectorXd(part.col(c)), -d, h);
+  return out;
+}
+
 }  // namespace
 
 // The uniform step of a split (0: no time stamps, or not uniform to 1 %).
@@ -103,15 +111,16 @@ void Diagnosis::estimate_delay() {
     delay_.why = "the fit or test split has no uniform time stamps: a delay cannot be estimated";
     return;
   }
+  // The model's columns are shifted, not the torques: resampling noisy torques between their
+  // samples averages neighbours and lowers the noise itself, which a fractional offset would
+  // then be credited with (exact-input draws named a delay on white noise that way).
   const BlockColumns nuisance = coulomb_nuisance(fit_);
-  const Fit f0 = fit_blocks({&fit_.base, &nuisance}, fit_.y0, true);
   auto projected = [&](double d) {
-    Eigen::VectorXd r = targets_at(fit_, d) - fit_.given;
-    r -= f0.Q * (f0.Q.transpose() * r);
-    return r;
+    const BlockColumns base = shifted_block(fit_.base, d, h), nuis = shifted_block(nuisance, d, h);
+    return fit_blocks({&base, &nuis}, fit_.b, false).residual;
   };
   auto rss = [&](double d) { return projected(d).squaredNorm(); };
-  const double step = std::max(h / 4, 2 * delay_.range / 200);
+  const double step = std::max(h / 4, 2 * delay_.range / 100);
   double best = 0, best_rss = rss(0);
   for (double d = -delay_.range; d <= delay_.range + 1e-12; d += step)
     if (const double v = rss(d); v < best_rss) best = d, best_rss = v;
@@ -133,7 +142,7 @@ void Diagnosis::estimate_delay() {
     // a roundoff-limited stop: x holds the best point found
   }
   if (value < best_rss) best = x[0], best_rss = value;
-  delay_decide(best, projected, f0.rank);
+  delay_decide(best, projected, fit_.base.cols + nuisance.cols);
 }
 
 // Standard error (Gauss-Newton, autocorrelation-robust), evidence and the held-out test; then
@@ -151,9 +160,9 @@ void Diagnosis::delay_decide(double d, const std::function<Eigen::VectorXd(doubl
   delay_.delta_bic = delta_bic(n_eff, r0.squaredNorm(), r.squaredNorm(), 1, rss_floor(fit_.b));
   // Held out: the base parameters refitted on the fit split with and without the shift.
   auto test_rss = [&](double dd) {
-    const Eigen::VectorXd yf = targets_at(fit_, dd) - fit_.given, yt = targets_at(test_, dd) - test_.given;
-    const Fit f = fit_blocks({&fit_.base}, yf, false);
-    return (yt - test_.base.times(f.coef)).squaredNorm();
+    const BlockColumns bf = shifted_block(fit_.base, dd, h), bt = shifted_block(test_.base, dd, uniform_step(test_));
+    const Fit f = fit_blocks({&bf}, fit_.b, false);
+    return (test_.b - bt.times(f.coef)).squaredNorm();
   };
   const bool evidence = delay_.delta_bic > opt_.bic_threshold && std::fabs(d) > 3 * delay_.stderr_ && std::fabs(d) >= kMinDelay;
   delay_.named = evidence && gains_on_test(test_rss(0), test_rss(d), opt_.min_gain, rss_floor(test_.b));
