@@ -77,10 +77,10 @@ BlockColumns Diagnosis::simulated_columns(const PluginInstance& inst, const Spli
     inst.plugin().compute(inst.state(), m, d.get(), qfrc.data());
     for (int o = 0; o < O; ++o) C(o * s.N + i, 0) = -qfrc[static_cast<size_t>(s.cols->output_dof[static_cast<size_t>(o)])];
     if (i + 1 == s.N) break;
-    // To the next row in substeps of at most 2 ms, the velocity interpolated linearly: a
+    // To the next row in substeps of at most 5 ms, the velocity interpolated linearly: a
     // velocity held over a whole row flips the bristles a row late at each reversal.
     const double dt = s.split.t[i + 1] - s.split.t[i];
-    const int steps = std::max(1, static_cast<int>(std::ceil(dt / 2e-3)));
+    const int steps = std::max(1, static_cast<int>(std::ceil(dt / 5e-3)));
     for (int k = 0; k < steps; ++k) {
       const double f = (k + 0.5) / steps;
       for (int j = 0; j < m->njnt; ++j) {
@@ -172,7 +172,7 @@ void Diagnosis::fit_stateful(Candidate& c, const Fit& current) {
     const double g = k->self->stateful_drop(*k->c, *k->current, v);
     return std::isfinite(g) ? g : -1e300;
   }, &ctx);
-  local.set_maxeval(120 * static_cast<int>(ns));
+  local.set_maxeval(80 * static_cast<int>(ns));
   local.set_xtol_abs(1e-4);
   // Two passes: subplex restarted from its own end point leaves a valley it had stalled in.
   for (int pass = 0; pass < (polish ? 2 : 0); ++pass) {

@@ -24,7 +24,7 @@ namespace spml::diagnose_detail {
 namespace {
 
 constexpr double kMinShare = 0.1;       // held-out variance share the GP must explain
-constexpr Eigen::Index kFitRows = 250;  // rows the GP is fitted on (evenly spaced; cubic cost)
+constexpr Eigen::Index kFitRows = 200;  // rows the GP is fitted on (evenly spaced; cubic cost)
 constexpr Eigen::Index kTestRows = 1500;
 
 // Rows `rows` of X, each column standardized by (mean, std) of the fit split.
@@ -56,7 +56,7 @@ nlohmann::json Diagnosis::unexplained_joint(size_t o, const Eigen::VectorXd& r_f
   start.lengthscales = Eigen::VectorXd::Ones(Xf.cols());
   start.signal_var = 0.5, start.noise_var = 0.5;
   gp::FitOptions fo;
-  fo.max_evals = 150;
+  fo.max_evals = 100;
   const gp::FitResult fit = gp::fit(lik, start, fo);
   const Eigen::MatrixXd Xt = standardized(test_.split.X, tr, mean, sd);
   const double m0 = Yt.squaredNorm();
