@@ -38,8 +38,10 @@ void Diagnosis::score_candidates(const Fit& current, const std::vector<int>& cho
     Candidate& c = cands_[k];
     if (c.skipped) continue;
     try {
-      if (c.stateful && !c.searched)   // #22: fitted once by simulation, against the residual before other causes on its joint
+      if (c.stateful && !c.searched) {   // #22: fitted once by simulation, against the residual before other causes on its joint
         fit_stateful(c, current);
+        if (c.skipped) continue;
+      }
       else if (!c.stateful && (!c.searched || (!c.shape.empty() && research.count(c.joint))))
         search_shape(c, current);
       else

@@ -193,6 +193,25 @@ void Diagnosis::fit_stateful(Candidate& c, const Fit& current) {
     if (level[k] && !std::isfinite(c.stateful_se[k]))
       for (const spml_config_key* key = c.plugin->config_keys; key && key->name; ++key)
         if (std::string(key->name) == c.shape[k]->key && key->min == 0) c.shape_values[k] = 0;
+  // The levels must be what the data show: on clean data the fit drives fc and fs to nothing
+  // and keeps only the bristle damping, a velocity lag that is not friction (a clean draw of
+  // DiagnoseRealistic named stick_slip that way). A stateful candidate whose every level is
+  // undetermined, or with one beyond 50 % relative error, is not that effect.
+  std::string loose;
+  int determined_levels = 0;
+  for (size_t k = 0; k < ns; ++k) {
+    if (!level[k] || c.shape_values[k] == 0) continue;
+    if (c.stateful_se[k] <= kNotIdentifiable * c.shape_values[k]) ++determined_levels;
+    else loose += std::string(loose.empty() ? "" : ", ") + c.shape[k]->key;
+  }
+  if (determined_levels == 0 || !loose.empty()) {
+    c.skipped = true;
+    c.searched = true;
+    not_tried_.push_back({{"effect", c.plugin->name}, {"joint", c.joint_name},
+                          {"reason", "fitted by simulation, but its levels (" + (loose.empty() ? std::string("all") : loose) +
+                                         ") are not determined by the data: not this effect"}});
+    return;
+  }
   PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
   c.fit_cols = simulated_columns(inst, fit_);
   c.gain = gain_of(c.fit_cols, current.Q, current.residual);
