@@ -117,6 +117,8 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
     for (const auto& n : r["notes"]) s << "- " << n.get<std::string>() << "\n";
   }
   if (with_plots) s << "\n## Plots\n\n![residuals](plots/residuals.png)\n\n![states](plots/states.png)\n";
+  if (with_plots && r.value("unexplained", nlohmann::json::array()).size() > 0)   // #22
+    s << "\n![unexplained](plots/unexplained.png)\n";
   return s.str();
 }
 

@@ -1,6 +1,8 @@
 #!/usr/bin/python3
 """Plots of a `spml diagnose` output folder: residuals against time before/after, and the
-measured states, per joint. Reads DIR/series.csv (written by diagnose), writes DIR/plots/*.png."""
+measured states, per joint, and the residual of joints reported unexplained against their most
+relevant input. Reads DIR/series.csv and DIR/unexplained.csv (written by diagnose), writes
+DIR/plots/*.png."""
 import csv
 import os
 import sys
@@ -47,6 +49,34 @@ def main(folder):
     axes[-1, 1].set_xlabel("t [s]")
     fig.tight_layout()
     fig.savefig(os.path.join(out, "states.png"), dpi=90)
+    plt.close(fig)
+    unexplained(folder, out)
+
+
+def unexplained(folder, out):
+    """Issue #22: each joint diagnose reports as unexplained - its held-out residual and the GP's
+    prediction against the most relevant input (DIR/unexplained.csv) - into plots/unexplained.png."""
+    path = os.path.join(folder, "unexplained.csv")
+    if not os.path.exists(path):
+        return
+    with open(path) as f:
+        rows = list(csv.reader(f))[1:]
+    joints = list(dict.fromkeys(r[0] for r in rows))
+    if not joints:
+        return
+    fig, axes = plt.subplots(len(joints), 1, figsize=(7, 2.4 * len(joints) + 0.6), squeeze=False)
+    for ax, j in zip(axes[:, 0], joints):
+        mine = sorted((float(r[2]), float(r[3]), float(r[4])) for r in rows if r[0] == j)
+        name = next(r[1] for r in rows if r[0] == j)
+        ax.plot([m[0] for m in mine], [m[1] for m in mine], ".", ms=2, color="tab:gray", label="residual (test)")
+        ax.plot([m[0] for m in mine], [m[2] for m in mine], ".", ms=2, color="tab:purple", label="GP on the residual")
+        ax.set_xlabel(name)
+        ax.set_ylabel(j)
+        ax.grid(alpha=0.3)
+    axes[0, 0].set_title("unexplained: final residual against its most relevant input")
+    axes[0, 0].legend(loc="upper right", fontsize=8, markerscale=4)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "unexplained.png"), dpi=90)
     plt.close(fig)
 
 
