@@ -172,6 +172,13 @@ void Diagnosis::delay_decide(double d, const std::function<Eigen::VectorXd(doubl
     return (test_.b - bt.times(f.coef)).squaredNorm();
   };
   const bool evidence = delay_.delta_bic > opt_.bic_threshold && std::fabs(d) > 3 * delay_.stderr_ && std::fabs(d) >= kMinDelay;
+  // Raw differences (the filter was detected, not recorded): the errors in the regressors
+  // gave spurious offsets of a few ms on clean RealisticDraws; estimated and reported, not named.
+  if (filter_plan_.source == FilterPlan::Source::detected) {
+    delay_.why = "not named: the velocities and accelerations are raw differences of noisy positions, whose errors make the "
+                 "offset unreliable (spurious delays were found on clean data); low-pass them at import (spml import --lowpass)";
+    return;
+  }
   // A delay worth correcting removes a tenth of the held-out residual: on raw differences of
   // coarse encoders (16 bit, 2 % torque noise) the errors in the regressors let a spurious
   // offset gain a few per cent (clean draws of RealisticDraws named `delay` at min_gain).
