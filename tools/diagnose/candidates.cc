@@ -14,6 +14,10 @@ namespace spml::diagnose_detail {
 void Diagnosis::find_candidates() {
   for (const std::string& name : available_force_plugins()) {
     const spml_force_plugin& p = load_force_plugin(name);
+    if (!p.regressor && is_stateful(p)) {   // #22: fitted by simulation (stateful_fit.cc)
+      add_stateful_candidates(p);
+      continue;
+    }
     if (!p.regressor) {
       not_tried_.push_back({{"effect", name},
                             {"reason", std::string(p.advance ? "stateful" : "not linear in its parameters") +
@@ -106,6 +110,7 @@ std::vector<std::pair<std::string, std::string>> Diagnosis::config_of(const Cand
 }
 
 BlockColumns Diagnosis::columns(const PluginInstance& inst, const SplitData& s) const {
+  if (!inst.plugin().regressor) return simulated_columns(inst, s);   // #22: a stateful plugin
   const mjModel* m = reg_->model();
   const int np = inst.nparam(), O = static_cast<int>(s.split.Y.cols());
   Eigen::MatrixXd C = Eigen::MatrixXd::Zero(s.N * O, np);
@@ -136,6 +141,7 @@ BlockColumns Diagnosis::columns_of(const Candidate& c, const SplitData& s) const
 
 std::string Diagnosis::refused(int candidate, const Eigen::VectorXd& theta) const {
   const Candidate& c = cands_[static_cast<size_t>(candidate)];
+  if (c.stateful) return theta.size() == 1 && theta[0] > 0 ? "" : "the simulated force would enter with a negative amplitude";   // #22
   // A Stribeck curve falls from its break-away level fs to the Coulomb level fc. Fitted with
   // fs < fc it is friction lower at low speed: the stick phases of Coulomb friction (the joint
   // held while the applied torque is below fc, read through estimated velocities), not Stribeck.

@@ -58,7 +58,7 @@ namespace {
 namespace fs = std::filesystem;
 // In the order they are moved into place: report.json last, so that a reader who sees it sees
 // the rest of the same run.
-const char* const kOutputs[] = {"extended.xml", "series.csv", "report.md", "report.json"};
+const char* const kOutputs[] = {"extended.xml", "series.csv", "unexplained.csv", "report.md", "report.json"};
 
 void refuse_inputs_among_outputs(const DiagnoseOptions& o, const fs::path& out) {
   std::vector<std::string> inputs = {o.model, o.data};

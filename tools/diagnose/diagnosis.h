@@ -12,10 +12,17 @@
 //   confirm.cc     causes whose written form makes rollouts worse beyond noise are rejected
 //   verify.cc      the written model: extended.xml, its own inverse dynamics, rollouts
 //   report_json.cc report.json (causes, metrics, cross-tests) and series.csv
+// Issue #22 (stages of their own, hooked in where marked "#22"):
+//   delay.cc       an offset between torques and states, estimated and corrected first
+//   stateful_fit.cc  stateful plugins (LuGre stick_slip) fitted by simulation along the log
+//   unexplained.cc the GP (ARD) on the final residual: structure no candidate explains
 #pragma once
 
 #include <Eigen/Core>
 #include <chrono>
+#include <deque>
+#include <sstream>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <optional>
@@ -68,6 +75,21 @@ struct Candidate {
   bool skipped = false;           // its plugin failed (non-finite columns): not a candidate
   Gain gain;
   double delta_bic = -std::numeric_limits<double>::infinity();
+  // #22: a stateful plugin fitted by simulation (stateful_fit.cc): every key is a shape value,
+  // fit_cols is its simulated force (one column).
+  bool stateful = false;
+  std::vector<double> stateful_se;            // per shape key, absolute
+  std::vector<std::string> not_identifiable;  // keys with a relative standard error above 50 %
+};
+
+bool is_stateful(const spml_force_plugin& p);   // #22: advance/reset and no regressor
+
+// #22: the offset between torques and states (delay.cc).
+struct DelayResult {
+  double seconds = 0, stderr_ = std::numeric_limits<double>::infinity(), delta_bic = 0, range = 0;
+  bool named = false;
+  std::string why;
+  Eigen::VectorXd y0_fit, y0_test;   // the fit and test targets before the correction (baseline)
 };
 
 struct Cause {
@@ -168,6 +190,25 @@ class Diagnosis {
   // confirm.cc
   bool confirm_in_simulation(const std::string& ext_path, MjcfEdits& edits);
   void note_rejections(const MjcfEdits& edits, std::vector<std::string>& notes);
+  // delay.cc (#22)
+  void estimate_delay();
+  void delay_decide(double d, const std::function<Eigen::VectorXd(double)>& projected, int rank);
+  double uniform_step(const SplitData& s) const;
+  Eigen::VectorXd targets_at(const SplitData& s, double d) const;
+  BlockColumns coulomb_nuisance(const SplitData& s) const;
+  nlohmann::json delay_report() const;
+  nlohmann::json delay_cause() const;
+  // stateful_fit.cc (#22)
+  void add_stateful_candidates(const spml_force_plugin& p);
+  BlockColumns simulated_columns(const PluginInstance& inst, const SplitData& s) const;
+  double stateful_drop(const Candidate& c, const Fit& current, const std::vector<double>& x, Eigen::VectorXd* force = nullptr) const;
+  void fit_stateful(Candidate& c, const Fit& current);
+  void stateful_errors(Candidate& c, const Fit& current, const std::vector<double>& x);
+  void stateful_report(const Candidate& c, double amplitude, nlohmann::json& params, nlohmann::json& se, nlohmann::json& j) const;
+  Eigen::VectorXd written_stateful(const SplitData& s) const;
+  // unexplained.cc (#22)
+  nlohmann::json unexplained_joint(size_t o, const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test, std::ostringstream& csv) const;
+  nlohmann::json unexplained(const std::string& out_dir, const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test) const;
   // verify.cc
   std::pair<Eigen::VectorXd, Eigen::VectorXd> verify(const std::string& out_dir, MjcfEdits& edits, std::vector<std::string>& notes,
                                                      const Eigen::VectorXd& final_pred_fit);
@@ -195,6 +236,9 @@ class Diagnosis {
   std::optional<WrittenParameters> written_;  // set in build_report when `parameters` is named
   std::vector<std::string> notes_;
   FilterPlan filter_plan_;
+  DelayResult delay_;   // #22
+  mutable std::shared_ptr<mjData> sim_data_;   // #22: the state the stateful simulations read (one thread)
+  std::deque<spml_shape_param> synthesized_;   // #22: the level keys of stateful plugins, searched as shapes
 };
 
 }  // namespace spml::diagnose_detail

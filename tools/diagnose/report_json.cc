@@ -136,24 +136,31 @@ nlohmann::json Diagnosis::effect_cause(size_t i, const Fit& final_fit, bool free
   PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
   const auto pnames = inst.param_names();
   nlohmann::json params = nlohmann::json::object(), se = nlohmann::json::object(), shape = nlohmann::json::object(), j_written;
-  Eigen::VectorXd theta(inst.nparam());
-  for (int k = 0; k < inst.nparam(); ++k) {
-    theta[k] = src.determined[static_cast<size_t>(off + k)] ? src.coef[off + k] : 0.0;
-    params[pnames[static_cast<size_t>(k)]] = theta[k];
-    se[pnames[static_cast<size_t>(k)]] = src.stderr_[off + k];
+  nlohmann::json stateful_extra = nlohmann::json::object();
+  // Written with the consistent parameters' joint fit (when parameters are named): its amplitudes go into the declaration.
+  const Eigen::Index woff = off - (free ? base_.rank : 0);
+  const bool joint_fit = kept && written_;
+  if (c.stateful) {   // #22: every key fitted by simulation (stateful_fit.cc); written as fitted
+    stateful_report(c, joint_fit ? written_->id.extra[woff] : src.coef[off], params, se, stateful_extra);
+  } else {
+    Eigen::VectorXd theta(inst.nparam());
+    for (int k = 0; k < inst.nparam(); ++k) {
+      theta[k] = src.determined[static_cast<size_t>(off + k)] ? src.coef[off + k] : 0.0;
+      params[pnames[static_cast<size_t>(k)]] = theta[k];
+      se[pnames[static_cast<size_t>(k)]] = src.stderr_[off + k];
+    }
+    for (size_t k = 0; k < c.shape.size(); ++k) shape[c.shape[k]->key] = c.shape_values[k];
+    if (joint_fit) {
+      nlohmann::json pw = nlohmann::json::object();
+      for (int k = 0; k < inst.nparam(); ++k) pw[pnames[static_cast<size_t>(k)]] = theta[k] = written_->id.extra[woff + k];
+      j_written = pw;
+    }
+    inst.set_params(theta);
   }
-  for (size_t k = 0; k < c.shape.size(); ++k) shape[c.shape[k]->key] = c.shape_values[k];
-  if (kept && written_) {
-    // Written with the consistent parameters' joint fit: its amplitudes go into the declaration.
-    nlohmann::json pw = nlohmann::json::object();
-    const Eigen::Index woff = off - (free ? base_.rank : 0);
-    for (int k = 0; k < inst.nparam(); ++k) pw[pnames[static_cast<size_t>(k)]] = theta[k] = written_->id.extra[woff + k];
-    j_written = pw;
-  }
-  inst.set_params(theta);
   const std::string config = inst.config_text();
   nlohmann::json j{{"effect", c.plugin->name}, {"joints", {c.joint_name}}, {"params", params}, {"stderr", se}, {"shape", shape},
                    {"delta_bic", cause.delta_bic}};
+  j.update(stateful_extra);
   put_after(j, after);
   if (!kept) j["superseded_by"] = cause.superseded_by;
   if (!j_written.is_null()) j["params_written"] = j_written;
@@ -189,7 +196,7 @@ nlohmann::json Diagnosis::cross_report(const Fit& final_fit, bool free, const nl
 void Diagnosis::build_report(const std::string& out_dir) {
   auto t0 = Clock::now();
   nlohmann::json& R = result_.report;
-  R["format"] = "spml-diagnose/2";
+  R["format"] = "spml-diagnose/3";   // #22: /3 adds delay, unexplained (README)
   R["model"] = opt_.model;
   R["data"] = opt_.data;
   if (!opt_.more_data.empty()) {
@@ -207,7 +214,9 @@ void Diagnosis::build_report(const std::string& out_dir) {
   R["base_parameters"] = {{"standard", reg_->param_names().size()}, {"rank", base_.rank},
                           {"tolerance", base_.tolerance}, {"smallest_kept", base_.smallest_kept},
                           {"largest_dropped", base_.largest_dropped}, {"close_call", base_.close_call()}};
-  R["baseline"] = metrics(fit_.y0, test_.y0);
+  // #22: the baseline is the data as measured, before a delay correction (delay.cc).
+  R["baseline"] = delay_.named ? metrics(delay_.y0_fit, delay_.y0_test) : metrics(fit_.y0, test_.y0);
+  R["delay"] = delay_report();
   R["parallel_filter"] = {{"source", filter_plan_.source == FilterPlan::Source::recorded   ? "recorded"
                                      : filter_plan_.source == FilterPlan::Source::detected ? "detected"
                                                                                            : "none"},
@@ -223,6 +232,10 @@ void Diagnosis::build_report(const std::string& out_dir) {
   nlohmann::json causes = nlohmann::json::array(), cross_after = nlohmann::json::array();
   MjcfEdits edits;
   std::vector<std::string> notes = notes_;
+  if (delay_.named) {   // #22: the delay comes first, it was corrected before everything else
+    causes.push_back(delay_cause());
+    cross_after.push_back(cross_errors({}, false, Fit{}));
+  }
   if (free) {
     written_ = consistent_parameters();
     causes.push_back(parameters_cause(final_fit, edits, notes));
@@ -232,6 +245,7 @@ void Diagnosis::build_report(const std::string& out_dir) {
   R["causes"] = causes;
   // The fit's own prediction; `final` is set by verify() from the written model itself.
   R["final_internal"] = metrics(final_fit.residual, final_test);
+  R["unexplained"] = unexplained(out_dir, final_fit.residual, final_test);   // #22 (unexplained.cc)
   if (!cross_.empty()) R["cross"] = cross_report(final_fit, free, cross_after);
   nlohmann::json still = nlohmann::json::array();
   for (size_t j = 0; j < still_.size(); ++j)

@@ -17,6 +17,7 @@ Eigen::VectorXd Diagnosis::written_prediction(const MjcfRegressor& ext, const Mj
   Eigen::VectorXd pred = stacked_base_regressor(ext, ebase, s.split.X, cols, s.name) * ebase.model_values;
   filter_stacked(s.sos, pred, s.N, s.runs);
   if (s.friction.size()) pred += s.friction;   // MuJoCo's frictionloss, as in `given` (load.cc)
+  pred += written_stateful(s);   // #22: stateful plugins are no regressor columns: simulated as declared
   return pred;
 }
 
