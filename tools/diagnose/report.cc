@@ -42,7 +42,7 @@ std::string report_summary(const nlohmann::json& r) {
     if (c["effect"] != "parameters") s << " on " << c["joints"][0].get<std::string>();
     s << "  (dBIC " << num(c["delta_bic"].get<double>(), 5) << ", test error after " << pct(c["rel_error_test_after_all"].get<double>()) << ")";
     if (c.contains("superseded_by")) s << "  superseded by " << c["superseded_by"].get<std::string>();
-    if (c.contains("rejected")) s << "  REJECTED in simulation: rollouts worse with it";
+    if (c.contains("rejected")) s << "  REJECTED: " << c["rejected"].value("summary", "in simulation, rollouts worse with it");
     s << "\n";
   }
   if (r["causes"].empty()) s << "  no cause found: nothing passes the evidence and held-out tests\n";
