@@ -315,13 +315,13 @@ std::string reviewer_arm(const std::string& j0_attributes) {
 )";
 }
 
-// Diagnoses 4 s of the model's own data (spml generate --model M --duration 4 --derive, seed 1).
-nlohmann::json diagnose_own_data(const std::string& name, const std::string& mjcf, int encoder_bits, double torque_noise) {
+// Diagnoses the model's own data (spml generate --model M --duration 4 --derive, seed 1).
+nlohmann::json diagnose_own_data(const std::string& name, const std::string& mjcf, int encoder_bits, double torque_noise, double duration = 4) {
   const auto dir = test::temp_dir(name);
   const std::string model = (dir / "m.xml").string(), data = (dir / "d.h5").string();
   std::ofstream(model) << mjcf;
   MeasurementOptions m;
-  m.duration = 4;
+  m.duration = duration;
   m.encoder_bits = encoder_bits;
   m.torque_noise = torque_noise;
   write_dataset(data, measured_dataset(simulate_measured(model, m), true, "generate"));
@@ -362,6 +362,31 @@ TEST(DiagnoseCases, NegativeFrictionLevelsAreRefused) {
     for (const auto& [k, v] : c.value("params_written", nlohmann::json::object()).items())
       if (k.find(".f") != std::string::npos || k.find(".level") != std::string::npos) EXPECT_GE(v.get<double>(), 0) << k;
   expect_final_not_worse(r);
+}
+
+// A spatial 2-hinge arm with MJCF frictionloss on both joints, its own exact data (10 s): the
+// re-identified parameters (a frictionloss level fitted as ideal Coulomb, written as MuJoCo's
+// soft constraint) made the written model worse on the held-out split: before, final 1.2 % for
+// 0.23 % as given, reported with `parameters` and `stribeck` on j2 as causes; now the held-out
+// guard leaves them out and extended.xml is the model as given.
+TEST(DiagnoseCases, WrittenModelWorseOnHeldOutDataFallsBackToTheModelAsGiven) {
+  const std::string mjcf = R"(<mujoco model="rr">
+  <option gravity="0 0 -9.81"/>
+  <worldbody>
+    <body name="link1">
+      <joint name="j1" type="hinge" axis="0 0 1" damping="0.1" frictionloss="0.2" armature="0.01"/>
+      <inertial pos="0.1 0.02 0.05" mass="2" fullinertia="0.02 0.03 0.025 0.001 0.002 0.003"/>
+      <body name="link2" pos="0.3 0 0.1">
+        <joint name="j2" type="hinge" axis="0 1 0" damping="0.1" frictionloss="0.2" armature="0.01"/>
+        <inertial pos="0.2 0.03 0.01" mass="1.5" fullinertia="0.01 0.02 0.015 0.001 0.002 0.0015"/>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+)";
+  const auto r = diagnose_own_data("dc-guard", mjcf, 0, 0, 10);
+  expect_final_not_worse(r);
+  EXPECT_TRUE(written_causes(r).empty()) << r["causes"].dump(1);
 }
 
 }  // namespace

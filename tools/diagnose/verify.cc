@@ -52,14 +52,15 @@ void Diagnosis::choose_partial(const std::string& ext_path, MjcfEdits& edits, st
   const std::string text_all = result_.extended_mjcf;
   auto none = write_scored(ext_path, effects_only, notes_none);
   const double rss_all = (fit_.b - written.first).squaredNorm(), rss_none = (fit_.b - none.first).squaredNorm();
-  if (rss_none < rss_all) {
+  // Equal to rounding, the MJCF's own parameters (the smaller change) are kept.
+  if (rss_none <= rss_all + rss_floor(fit_.b)) {
     written = std::move(none);
     edits = effects_only;
     notes = notes_none;
     R["parameters_written"] = "none";
     notes.push_back("the re-identified parameters could be written only in part (inertials refused), and that version fits the fit "
-                    "split worse (relative error " + fmt(std::sqrt(rss_all) / fit_.b.norm()) + ") than the MJCF's own parameters with "
-                    "the effects (" + fmt(std::sqrt(rss_none) / fit_.b.norm()) + "): extended.xml keeps the MJCF's parameters");
+                    "split no better (relative error " + fmt(std::sqrt(rss_all) / fit_.b.norm(), 8) + ") than the MJCF's own parameters "
+                    "with the effects (" + fmt(std::sqrt(rss_none) / fit_.b.norm(), 8) + "): extended.xml keeps the MJCF's parameters");
   } else {
     result_.extended_mjcf = text_all;
     write_text_atomic(ext_path, result_.extended_mjcf);
@@ -88,8 +89,8 @@ std::pair<Eigen::VectorXd, Eigen::VectorXd> Diagnosis::verify(const std::string&
     note_rejections(edits, notes);
     changed = true;
   }
-  // Effects fitted jointly with parameters that are not written are fitted again with what is.
-  if (parameters_named_ && R["parameters_written"] != "all") changed |= refit_written_effects(ext_path, edits, notes);
+  // The effects are fitted again with the parameters written (and checked by their plugins).
+  changed |= refit_written_effects(ext_path, edits, notes);
   if (changed) {
     std::vector<std::string> again;   // the same edit notes as before, not repeated
     written = write_scored(ext_path, edits, again);
