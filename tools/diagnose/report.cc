@@ -87,6 +87,7 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
     s << " on " << joints << " - ΔBIC " << num(c["delta_bic"].get<double>(), 5) << ", test error after "
       << pct(c["rel_error_test_after_all"].get<double>());
     if (c.contains("superseded_by")) s << " (superseded by " << c["superseded_by"].get<std::string>() << ")";
+    if (c.contains("rejected")) s << " - **rejected, not in extended.xml**: " << c["rejected"].value("reason", "");
     s << "\n   - " << params_text(c, "\n   - ") << "\n";
     if (c.contains("not_identifiable") && !c["not_identifiable"].empty())
       s << "   - not identifiable from this data: " << c["not_identifiable"].size() << " base parameter(s)\n";
