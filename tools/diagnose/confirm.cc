@@ -147,3 +147,114 @@ bool Diagnosis::confirm_in_simulation(const std::string& ext_path, MjcfEdits& ed
 }
 
 }  // namespace spml::diagnose_detail
+
+namespace spml::diagnose_detail {
+namespace {
+
+bool is_diagnosed(const std::pair<std::string, std::string>& text) { return text.first.rfind("spml.plugin.diagnosed_", 0) == 0; }
+
+}  // namespace
+
+// The written effects are fitted again, by least squares on the fit split, against what the
+// written model without them predicts: amplitudes fitted jointly with parameters that are then
+// not written (refused inertials, rejected terms) belong to another model. A cause whose
+// amplitudes the plugin then refuses (a negative friction level, fs < fc) is rejected and the
+// rest fitted again without it. Returns true when a declaration changed.
+bool Diagnosis::refit_written_effects(const std::string& ext_path, MjcfEdits& edits, std::vector<std::string>& notes) {
+  nlohmann::json& causes = result_.report["causes"];
+  const size_t first = parameters_named_ ? 1 : 0;
+  bool changed = false;
+  for (bool again = true; again;) {
+    again = false;
+    std::vector<size_t> live;
+    for (size_t i = 0; i < causes_.size(); ++i) {
+      const nlohmann::json& cj = causes[first + i];
+      // A stateful cause (#22) keeps the keys its simulation fit found: it has no linear amplitudes to refit.
+      if (causes_[i].superseded_by.empty() && cj.contains("declaration") && !cj.contains("rejected") &&
+          !cands_[static_cast<size_t>(causes_[i].candidate)].stateful)
+        live.push_back(i);
+    }
+    if (live.empty()) break;
+    MjcfEdits bare = edits;
+    // Without the effects refitted here; a stateful one (not refitted) stays in, so `rest` is net of its force.
+    std::vector<std::string> refitted;
+    for (size_t i : live) refitted.push_back(causes[first + i]["declaration"].get<std::string>());
+    bare.texts.erase(std::remove_if(bare.texts.begin(), bare.texts.end(),
+                                    [&](const auto& t) { return is_diagnosed(t) && std::find(refitted.begin(), refitted.end(), t.second) != refitted.end(); }),
+                     bare.texts.end());
+    std::vector<std::string> ignored;
+    write_text_atomic(ext_path, edit_mjcf(opt_.model, bare, ignored));
+    const MjcfRegressor ext(ext_path);
+    const Eigen::VectorXd rest = fit_.b - written_prediction(ext, ext.base_parameters(), fit_);
+    std::vector<const BlockColumns*> blocks;
+    for (size_t i : live) blocks.push_back(&cands_[static_cast<size_t>(causes_[i].candidate)].fit_cols);
+    const Fit f = fit_blocks(blocks, rest, false);
+    Eigen::Index off = 0;
+    for (size_t i : live) {
+      const Candidate& c = cands_[static_cast<size_t>(causes_[i].candidate)];
+      Eigen::VectorXd theta(c.fit_cols.cols);
+      for (Eigen::Index k = 0; k < theta.size(); ++k) theta[k] = f.determined[static_cast<size_t>(off + k)] ? f.coef[off + k] : 0.0;
+      off += c.fit_cols.cols;
+      nlohmann::json& cj = causes[first + i];
+      auto text = std::find_if(edits.texts.begin(), edits.texts.end(), [&](const auto& t) { return t.second == cj["declaration"].get<std::string>(); });
+      if (text == edits.texts.end()) continue;
+      const std::string why = refused(causes_[i].candidate, theta);
+      if (!why.empty()) {
+        edits.texts.erase(text);
+        cj["rejected"] = {{"reason", "fitted with the parameters extended.xml states, " + why + "; extended.xml leaves it out"},
+                          {"summary", "refused once fitted with the written parameters"}};
+        again = changed = true;
+        break;
+      }
+      PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
+      inst.set_params(theta);
+      const auto pnames = inst.param_names();
+      nlohmann::json pw = nlohmann::json::object();
+      for (Eigen::Index k = 0; k < theta.size(); ++k) pw[pnames[static_cast<size_t>(k)]] = theta[k];
+      const std::string decl = "type=" + std::string(c.plugin->name) + " joints=" + c.joint_name + " " + inst.config_text();
+      changed |= decl != text->second;
+      text->second = decl;
+      cj["declaration"] = decl;
+      cj["params_written"] = pw;
+    }
+  }
+  if (changed && parameters_named_ && result_.report["parameters_written"] != "all")
+    notes.push_back("the effects were fitted jointly with re-identified parameters that extended.xml does not keep (all): their amplitudes "
+                    "(causes[].params_written) are fitted again with the parameters it states");
+  return changed;
+}
+
+// The written model must not predict the held-out split worse than the model as given: then
+// the re-identified parameters go first (the effects fitted again with the MJCF's own), and if
+// that is still worse, every cause: extended.xml is the model as given, and the notes say why.
+void Diagnosis::guard_held_out(const std::string& ext_path, MjcfEdits& edits, std::vector<std::string>& notes,
+                               std::pair<Eigen::VectorXd, Eigen::VectorXd>& written) {
+  nlohmann::json& R = result_.report;
+  const double given = test_.y0.squaredNorm();
+  // Worse beyond rounding: the model as given written back predicts `given` to the last digits.
+  auto worse = [&] { return (test_.b - written.second).squaredNorm() > given + rss_floor(test_.b); };
+  if (!worse()) return;
+  const std::string why = "the written model predicts the held-out split '" + test_name_ + "' worse (relative error " +
+                          fmt((test_.b - written.second).norm() / test_.b.norm(), 8) + ") than the model as given (" +
+                          fmt(std::sqrt(given) / test_.b.norm(), 8) + ")";
+  const nlohmann::json record = {{"reason", why + "; extended.xml leaves it out"}, {"summary", "held-out error worse than the model as given"}};
+  std::vector<std::string> ignored;
+  if (parameters_named_ && (!edits.joint_attributes.empty() || !edits.inertials.empty())) {
+    edits.joint_attributes.clear();
+    edits.inertials.clear();
+    R["causes"][0]["rejected"] = record;
+    R["parameters_written"] = "none";
+    notes.push_back(why + ": the re-identified parameters are left out and the effects fitted again with the MJCF's own");
+    refit_written_effects(ext_path, edits, notes);
+    written = write_scored(ext_path, edits, ignored);
+    if (!worse()) return;
+  }
+  for (auto& c : R["causes"])
+    if (!c.contains("superseded_by") && !c.contains("rejected")) c["rejected"] = record;
+  edits = MjcfEdits{{}, {}, {}, edits.comment};
+  R["parameters_written"] = "none";
+  written = write_scored(ext_path, edits, ignored);
+  notes.push_back(why + " with its causes: none is written (causes[].rejected), extended.xml is the model as given");
+}
+
+}  // namespace spml::diagnose_detail

@@ -154,11 +154,12 @@ class Diagnosis {
                       const std::vector<std::pair<std::string, std::string>>& fixed);
   bool bound_wavenumber(Candidate& c, double stroke);
   std::vector<std::pair<std::string, std::string>> config_of(const Candidate& c, const std::vector<double>& shape) const;
-  BlockColumns columns(const PluginInstance& inst, const SplitData& s) const;
+  BlockColumns columns(const PluginInstance& inst, const SplitData& s, bool filtered = true) const;
   BlockColumns columns_of(const Candidate& c, const SplitData& s) const;
   // "" when the plugin accepts its fitted parameters (written back through write_config and
   // created again), else its reason: a negative band level is not a friction band.
   std::string refused(int candidate, const Eigen::VectorXd& theta) const;
+  std::string injects_energy(const Candidate& c, const Eigen::VectorXd& theta) const;
   // shape_search.cc
   double search_shape(Candidate& c, const Fit& current);
   // estimate.cc
@@ -205,13 +206,19 @@ class Diagnosis {
   void fit_stateful(Candidate& c, const Fit& current);
   void stateful_errors(Candidate& c, const Fit& current, const std::vector<double>& x);
   void stateful_report(const Candidate& c, double amplitude, nlohmann::json& params, nlohmann::json& se, nlohmann::json& j) const;
-  Eigen::VectorXd written_stateful(const SplitData& s) const;
+  Eigen::VectorXd written_stateful(const SplitData& s, const mjModel* ext) const;
   // unexplained.cc (#22)
   nlohmann::json unexplained_joint(size_t o, const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test, std::ostringstream& csv) const;
   nlohmann::json unexplained(const std::string& out_dir, const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test) const;
   // verify.cc
   std::pair<Eigen::VectorXd, Eigen::VectorXd> verify(const std::string& out_dir, MjcfEdits& edits, std::vector<std::string>& notes,
                                                      const Eigen::VectorXd& final_pred_fit);
+  std::pair<Eigen::VectorXd, Eigen::VectorXd> write_scored(const std::string& ext_path, MjcfEdits& e, std::vector<std::string>& n);
+  void choose_partial(const std::string& ext_path, MjcfEdits& edits, std::vector<std::string>& notes,
+                      std::pair<Eigen::VectorXd, Eigen::VectorXd>& written);
+  bool refit_written_effects(const std::string& ext_path, MjcfEdits& edits, std::vector<std::string>& notes);
+  void guard_held_out(const std::string& ext_path, MjcfEdits& edits, std::vector<std::string>& notes,
+                      std::pair<Eigen::VectorXd, Eigen::VectorXd>& written);
   void run_rollouts(const std::string& ext_path, std::vector<std::string>& notes);
   Eigen::VectorXd written_prediction(const MjcfRegressor& ext, const MjcfRegressor::Base& ebase, const SplitData& s) const;
 

@@ -43,7 +43,7 @@ std::string report_summary(const nlohmann::json& r) {
     else if (c["effect"] != "parameters") s << " on " << c["joints"][0].get<std::string>();
     s << "  (dBIC " << num(c["delta_bic"].get<double>(), 5) << ", test error after " << pct(c["rel_error_test_after_all"].get<double>()) << ")";
     if (c.contains("superseded_by")) s << "  superseded by " << c["superseded_by"].get<std::string>();
-    if (c.contains("rejected")) s << "  REJECTED in simulation: rollouts worse with it";
+    if (c.contains("rejected")) s << "  REJECTED: " << c["rejected"].value("summary", "in simulation, rollouts worse with it");
     s << "\n";
   }
   if (r["causes"].empty()) s << "  no cause found: nothing passes the evidence and held-out tests\n";
@@ -92,6 +92,7 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
     s << " on " << joints << " - ΔBIC " << num(c["delta_bic"].get<double>(), 5) << ", test error after "
       << pct(c["rel_error_test_after_all"].get<double>());
     if (c.contains("superseded_by")) s << " (superseded by " << c["superseded_by"].get<std::string>() << ")";
+    if (c.contains("rejected")) s << " - **rejected, not in extended.xml**: " << c["rejected"].value("reason", "");
     s << "\n   - " << params_text(c, "\n   - ") << "\n";
     if (c.contains("not_identifiable") && !c["not_identifiable"].empty())
       s << "   - not identifiable from this data: " << c["not_identifiable"].size() << " base parameter(s)\n";

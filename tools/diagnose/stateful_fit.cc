@@ -261,11 +261,15 @@ void Diagnosis::stateful_report(const Candidate& c, double amplitude, nlohmann::
 
 // The written model's stateful forces on a split (MuJoCo's inverse dynamics of extended.xml
 // leaves them out: they are not regressor columns), as declared: unit amplitude.
-Eigen::VectorXd Diagnosis::written_stateful(const SplitData& s) const {
+// Only those the written model declares: a cause rejected later (rollouts, the held-out guard) is
+// no longer in extended.xml, and its simulated force must leave the written model's score too.
+Eigen::VectorXd Diagnosis::written_stateful(const SplitData& s, const mjModel* ext) const {
   Eigen::VectorXd out = Eigen::VectorXd::Zero(s.b.size());
   for (int k : kept_effects()) {
     const Candidate& c = cands_[static_cast<size_t>(k)];
     if (!c.stateful) continue;
+    const std::string name = "spml.plugin.diagnosed_" + std::string(c.plugin->name) + "_" + c.joint_name;
+    if (mj_name2id(ext, mjOBJ_TEXT, name.c_str()) < 0) continue;
     PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "extended");
     out += simulated_columns(inst, s).dense().col(0);
   }

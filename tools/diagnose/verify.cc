@@ -17,8 +17,55 @@ Eigen::VectorXd Diagnosis::written_prediction(const MjcfRegressor& ext, const Mj
   Eigen::VectorXd pred = stacked_base_regressor(ext, ebase, s.split.X, cols, s.name) * ebase.model_values;
   filter_stacked(s.sos, pred, s.N, s.runs);
   if (s.friction.size()) pred += s.friction;   // MuJoCo's frictionloss, as in `given` (load.cc)
-  pred += written_stateful(s);   // #22: stateful plugins are no regressor columns: simulated as declared
+  pred += written_stateful(s, ext.model());   // #22: stateful plugins are no regressor columns: simulated as declared
   return pred;
+}
+
+// Writes one version of the model to ext_path and returns its predictions on the fit and test
+// splits (its own inverse dynamics, reloaded with MuJoCo).
+std::pair<Eigen::VectorXd, Eigen::VectorXd> Diagnosis::write_scored(const std::string& ext_path, MjcfEdits& e, std::vector<std::string>& n) {
+  try {
+    result_.extended_mjcf = edit_mjcf(opt_.model, e, n);
+  } catch (const std::runtime_error& err) {
+    if (e.inertials.empty()) throw;
+    // A compiler setting that would override written inertials (inertiafromgeom, settotalmass).
+    e.inertials.clear();
+    n.push_back(std::string(err.what()) + ": the re-identified inertials are not written");
+    parameters_partial_ = true;
+    result_.extended_mjcf = edit_mjcf(opt_.model, e, n);
+  }
+  write_text_atomic(ext_path, result_.extended_mjcf);
+  MjcfRegressor ext(ext_path);
+  const auto ebase = ext.base_parameters();
+  return std::make_pair(written_prediction(ext, ebase, fit_), written_prediction(ext, ebase, test_));
+}
+
+// Re-identified parameters written only in part (inertials refused) are one solution cut in
+// two; they may predict worse than the MJCF's own. The version that fits the fit split better
+// is kept.
+void Diagnosis::choose_partial(const std::string& ext_path, MjcfEdits& edits, std::vector<std::string>& notes,
+                               std::pair<Eigen::VectorXd, Eigen::VectorXd>& written) {
+  nlohmann::json& R = result_.report;
+  MjcfEdits effects_only = edits;
+  effects_only.joint_attributes.clear();
+  effects_only.inertials.clear();
+  std::vector<std::string> notes_none = notes;
+  const std::string text_all = result_.extended_mjcf;
+  auto none = write_scored(ext_path, effects_only, notes_none);
+  const double rss_all = (fit_.b - written.first).squaredNorm(), rss_none = (fit_.b - none.first).squaredNorm();
+  // Equal to rounding, the MJCF's own parameters (the smaller change) are kept.
+  if (rss_none <= rss_all + rss_floor(fit_.b)) {
+    written = std::move(none);
+    edits = effects_only;
+    notes = notes_none;
+    R["parameters_written"] = "none";
+    notes.push_back("the re-identified parameters could be written only in part (inertials refused), and that version fits the fit "
+                    "split no better (relative error " + fmt(std::sqrt(rss_all) / fit_.b.norm(), 8) + ") than the MJCF's own parameters "
+                    "with the effects (" + fmt(std::sqrt(rss_none) / fit_.b.norm(), 8) + "): extended.xml keeps the MJCF's parameters");
+  } else {
+    result_.extended_mjcf = text_all;
+    write_text_atomic(ext_path, result_.extended_mjcf);
+  }
 }
 
 // Writes extended.xml and scores it: `final` in report.json is the written model's, reloaded
@@ -30,73 +77,39 @@ std::pair<Eigen::VectorXd, Eigen::VectorXd> Diagnosis::verify(const std::string&
   auto t0 = Clock::now();
   nlohmann::json& R = result_.report;
   edits.comment = "extended by spml diagnose from " + opt_.model + " and " + opt_.data + " (fit split '" + opt_.fit_split + "')";
-  const fs::path ext_path = out_dir.empty() ? fs::temp_directory_path() / ("spml-extended-" + std::to_string(::getpid()) + ".xml")
-                                            : fs::path(out_dir) / "extended.xml";
+  const std::string ext_path = (out_dir.empty() ? fs::temp_directory_path() / ("spml-extended-" + std::to_string(::getpid()) + ".xml")
+                                                : fs::path(out_dir) / "extended.xml").string();
   if (!out_dir.empty()) fs::create_directories(out_dir);
-  // Writes one version of the model and returns its predictions on the fit and test splits.
-  auto write_and_score = [&](MjcfEdits& e, std::vector<std::string>& n) {
-    try {
-      result_.extended_mjcf = edit_mjcf(opt_.model, e, n);
-    } catch (const std::runtime_error& err) {
-      if (e.inertials.empty()) throw;
-      // A compiler setting that would override written inertials (inertiafromgeom, settotalmass).
-      e.inertials.clear();
-      n.push_back(std::string(err.what()) + ": the re-identified inertials are not written");
-      parameters_partial_ = true;
-      result_.extended_mjcf = edit_mjcf(opt_.model, e, n);
-    }
-    write_text_atomic(ext_path.string(), result_.extended_mjcf);
-    MjcfRegressor ext(ext_path.string());
-    const auto ebase = ext.base_parameters();
-    return std::make_pair(written_prediction(ext, ebase, fit_), written_prediction(ext, ebase, test_));
-  };
   std::vector<std::string> notes_all = notes;
-  std::pair<Eigen::VectorXd, Eigen::VectorXd> written = write_and_score(edits, notes_all);
+  std::pair<Eigen::VectorXd, Eigen::VectorXd> written = write_scored(ext_path, edits, notes_all);
   R["parameters_written"] = !parameters_named_ ? "none" : parameters_partial_ ? "partial" : "all";
-  if (parameters_partial_) {
-    // The re-identified parameters are one solution; written in part (inertials refused) they
-    // may predict worse than the MJCF's own. The version that fits the fit split better is kept.
-    MjcfEdits effects_only = edits;
-    effects_only.joint_attributes.clear();
-    effects_only.inertials.clear();
-    std::vector<std::string> notes_none = notes;
-    const std::string text_all = result_.extended_mjcf;
-    auto none = write_and_score(effects_only, notes_none);
-    const double rss_all = (fit_.b - written.first).squaredNorm(), rss_none = (fit_.b - none.first).squaredNorm();
-    if (rss_none < rss_all) {
-      written = std::move(none);
-      edits = effects_only;
-      notes_all = notes_none;
-      R["parameters_written"] = "none";
-      notes_all.push_back("the re-identified parameters could be written only in part (inertials refused), and that version fits the fit "
-                          "split worse (relative error " + fmt(std::sqrt(rss_all) / fit_.b.norm()) + ") than the MJCF's own parameters with "
-                          "the effects (" + fmt(std::sqrt(rss_none) / fit_.b.norm()) + "): extended.xml keeps the MJCF's parameters");
-    } else {
-      result_.extended_mjcf = text_all;
-      write_text_atomic(ext_path.string(), result_.extended_mjcf);
-    }
-  }
+  if (parameters_partial_) choose_partial(ext_path, edits, notes_all, written);
   notes = notes_all;
-  if (confirm_in_simulation(ext_path.string(), edits)) {
-    std::vector<std::string> again;   // the same edit notes as before, not repeated
-    written = write_and_score(edits, again);
+  bool changed = false;
+  if (confirm_in_simulation(ext_path, edits)) {
     note_rejections(edits, notes);
+    changed = true;
   }
+  // The effects are fitted again with the parameters written (and checked by their plugins).
+  changed |= refit_written_effects(ext_path, edits, notes);
+  if (changed) {
+    std::vector<std::string> again;   // the same edit notes as before, not repeated
+    written = write_scored(ext_path, edits, again);
+  }
+  guard_held_out(ext_path, edits, notes, written);
   R["extended_mjcf"] = out_dir.empty() ? "" : "extended.xml";
-  {
-    R["extended_check"] = {{"max_abs_deviation", (written.first - final_pred_fit).cwiseAbs().maxCoeff()},
-                           {"rms_torque", std::sqrt(fit_.b.squaredNorm() / static_cast<double>(fit_.b.size()))}};
-    R["final"] = metrics(fit_.b - written.first, test_.b - written.second);
-    nlohmann::json plugins = nlohmann::json::array();
-    for (const auto& [name, data] : edits.texts) plugins.push_back(name);
-    R["needs_spml_plugins"] = plugins;
-    if (!plugins.empty())
-      notes.push_back("extended.xml declares " + std::to_string(plugins.size()) + " spml force plugin(s) (needs_spml_plugins): plain MuJoCo "
-                      "ignores these <custom><text> elements; simulate with spml (ForceEffects) to see them");
-  }
+  R["extended_check"] = {{"max_abs_deviation", (written.first - final_pred_fit).cwiseAbs().maxCoeff()},
+                         {"rms_torque", std::sqrt(fit_.b.squaredNorm() / static_cast<double>(fit_.b.size()))}};
+  R["final"] = metrics(fit_.b - written.first, test_.b - written.second);
+  nlohmann::json plugins = nlohmann::json::array();
+  for (const auto& [name, data] : edits.texts) plugins.push_back(name);
+  R["needs_spml_plugins"] = plugins;
+  if (!plugins.empty())
+    notes.push_back("extended.xml declares " + std::to_string(plugins.size()) + " spml force plugin(s) (needs_spml_plugins): plain MuJoCo "
+                    "ignores these <custom><text> elements; simulate with spml (ForceEffects) to see them");
   result_.timings.outputs += since(t0);
   t0 = Clock::now();
-  run_rollouts(ext_path.string(), notes);
+  run_rollouts(ext_path, notes);
   if (out_dir.empty()) fs::remove(ext_path);
   result_.timings.rollouts += since(t0);
   return written;
