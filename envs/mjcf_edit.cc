@@ -21,13 +21,36 @@ void visit(XMLElement* root, const std::function<void(XMLElement*)>& f) {
   }
 }
 
-XMLElement* named(XMLElement* root, const std::string& tag, const std::string& name) {
+// Joints and bodies are defined under <worldbody> only: an <equality><joint name=...> or a
+// <sensor> refers to them by the same attribute and must not be edited.
+XMLElement* defined(XMLElement* root, const std::string& tag, const std::string& name) {
   XMLElement* hit = nullptr;
-  visit(root, [&](XMLElement* e) {
-    const char* n = e->Attribute("name");
-    if (!hit && tag == e->Name() && n && name == n) hit = e;
-  });
+  for (XMLElement* w = root->FirstChildElement("worldbody"); w && !hit; w = w->NextSiblingElement("worldbody"))
+    visit(w, [&](XMLElement* e) {
+      const char* n = e->Attribute("name");
+      if (!hit && tag == e->Name() && n && name == n) hit = e;
+    });
   return hit;
+}
+
+// An XML comment may not hold "--" (a data path with "-->" would end it and inject markup).
+std::string comment_text(std::string s) {
+  for (size_t at; (at = s.find("--")) != std::string::npos;) s.replace(at, 2, "- -");
+  if (!s.empty() && s.back() == '-') s += ' ';
+  return s;
+}
+
+// A <custom><text> name not yet used in the document: editing an already edited model (a
+// diagnosis of an extended.xml) must not repeat a name MuJoCo requires to be unique.
+std::string unique_text_name(XMLElement* custom, const std::string& name) {
+  auto used = [&](const std::string& n) {
+    for (XMLElement* t = custom->FirstChildElement("text"); t; t = t->NextSiblingElement("text"))
+      if (const char* v = t->Attribute("name"); v && n == v) return true;
+    return false;
+  };
+  std::string out = name;
+  for (int k = 2; used(out); ++k) out = name + "_" + std::to_string(k);
+  return out;
 }
 
 std::string joined(const double* v, int n) {
@@ -89,7 +112,7 @@ std::string edit_mjcf(const std::string& model_path, const MjcfEdits& edits, std
   if (!edits.inertials.empty()) check_compiler(root, model_path);
   absolute_paths(root, fs::absolute(fs::path(model_path)).parent_path());
   for (const auto& [joint, attrs] : edits.joint_attributes) {
-    XMLElement* e = named(root, "joint", joint);
+    XMLElement* e = defined(root, "joint", joint);
     if (!e) {
       notes.push_back("joint '" + joint + "' is not defined in " + model_path + " itself (an included file?): its values are not written");
       continue;
@@ -97,7 +120,7 @@ std::string edit_mjcf(const std::string& model_path, const MjcfEdits& edits, std
     for (const auto& [attr, value] : attrs) e->SetAttribute(attr.c_str(), exact_text(value).c_str());
   }
   for (const auto& in : edits.inertials) {
-    XMLElement* body = named(root, "body", in.body);
+    XMLElement* body = defined(root, "body", in.body);
     if (body)
       set_inertial(doc, body, in);
     else
@@ -108,12 +131,19 @@ std::string edit_mjcf(const std::string& model_path, const MjcfEdits& edits, std
     if (!custom) custom = root->InsertEndChild(doc.NewElement("custom"))->ToElement();
     for (const auto& [name, data] : edits.texts) {
       XMLElement* text = doc.NewElement("text");
-      text->SetAttribute("name", name.c_str());
+      text->SetAttribute("name", unique_text_name(custom, name).c_str());
       text->SetAttribute("data", data.c_str());
       custom->InsertEndChild(text);
     }
   }
-  if (!edits.comment.empty()) doc.InsertFirstChild(doc.NewComment((" " + edits.comment + " ").c_str()));
+  if (!edits.comment.empty()) {
+    // After an <?xml ...?> declaration, which must stay first.
+    auto* comment = doc.NewComment((" " + comment_text(edits.comment) + " ").c_str());
+    if (doc.FirstChild() && doc.FirstChild()->ToDeclaration())
+      doc.InsertAfterChild(doc.FirstChild(), comment);
+    else
+      doc.InsertFirstChild(comment);
+  }
   tinyxml2::XMLPrinter printer;
   doc.Print(&printer);
   return printer.CStr();

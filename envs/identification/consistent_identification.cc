@@ -41,6 +41,7 @@ Reduced reduce(const Eigen::MatrixXd& W, const Eigen::VectorXd& tau, const Eigen
 }
 
 // Which standard parameters are fitted; the others keep the MJCF's values, with a note why.
+// Extra columns (past the standard parameters) are free terms, fitted where the data see them.
 Layout make_layout(const MjcfRegressor& reg, const Eigen::VectorXd& norms, std::vector<std::string>& body_notes,
                    std::vector<bool>& term_fitted) {
   Layout L;
@@ -63,6 +64,11 @@ Layout make_layout(const MjcfRegressor& reg, const Eigen::VectorXd& norms, std::
     L.terms.push_back(k);
     L.bounded.push_back(kind == "armature" || kind == "damping" || kind == "coulomb" || kind == "stiffness");
   }
+  for (auto k = static_cast<int>(p); k < norms.size(); ++k)
+    if (norms[k] > 0) {
+      L.terms.push_back(k);
+      L.bounded.push_back(false);
+    }
   return L;
 }
 
@@ -224,11 +230,20 @@ Eigen::MatrixXd stacked_standard_regressor(const MjcfRegressor& reg, const RowMa
   return stacked_base_regressor(reg, all, X, cols, where);
 }
 
-ConsistentIdentification fit_consistent(const MjcfRegressor& reg, const Eigen::MatrixXd& W, const Eigen::VectorXd& tau,
-                                        const ConsistentOptions& o) {
+ConsistentIdentification fit_consistent(const MjcfRegressor& reg, const Eigen::MatrixXd& W_standard, const Eigen::VectorXd& tau,
+                                        const ConsistentOptions& o, const Eigen::MatrixXd& extra) {
   const auto t0 = std::chrono::steady_clock::now();
   const auto p = static_cast<Eigen::Index>(reg.param_names().size());
-  if (W.cols() != p || W.rows() != tau.size() || W.rows() == 0)
+  if (extra.cols() > 0 && extra.rows() != W_standard.rows())
+    throw std::runtime_error("consistent identification: " + std::to_string(extra.rows()) + " rows of extra columns for " +
+                             std::to_string(W_standard.rows()) + " rows of the regressor");
+  Eigen::MatrixXd W_joined;
+  if (extra.cols() > 0) {
+    W_joined.resize(W_standard.rows(), W_standard.cols() + extra.cols());
+    W_joined << W_standard, extra;
+  }
+  const Eigen::MatrixXd& W = extra.cols() > 0 ? W_joined : W_standard;
+  if (W_standard.cols() != p || W.rows() != tau.size() || W.rows() == 0)
     throw std::runtime_error("consistent identification: the regressor has " + std::to_string(W.cols()) + " columns and " +
                              std::to_string(W.rows()) + " rows for " + std::to_string(p) + " parameters and " +
                              std::to_string(tau.size()) + " torques");
@@ -245,7 +260,8 @@ ConsistentIdentification fit_consistent(const MjcfRegressor& reg, const Eigen::M
   ConsistentIdentification out;
   out.sigma_objective = std::max(std::sqrt(red.rss_least_squares / dof), floor);
   out.rank = red.rank;
-  out.prior = reg.model_params();
+  out.prior = Eigen::VectorXd::Zero(W.cols());   // extra columns: toward 0, worth lambda equations like every term
+  out.prior.head(p) = reg.model_params();
   out.prior_weight = o.prior_weight;
   std::vector<std::string> body_notes;
   std::vector<bool> term_fitted;
@@ -274,6 +290,13 @@ ConsistentIdentification fit_consistent(const MjcfRegressor& reg, const Eigen::M
   const Eigen::MatrixXd H = obj.hessian(min.theta, std::max(out.sigma, floor));
   const Eigen::MatrixXd cov = H.ldlt().solve(Eigen::MatrixXd::Identity(H.rows(), H.cols()));
   out.covariance = Jt * cov * Jt.transpose();
+  if (extra.cols() > 0) {   // split the extra columns' coefficients off
+    out.extra = out.pi.tail(extra.cols());
+    out.extra_std_error = out.covariance.diagonal().tail(extra.cols()).cwiseMax(0.0).cwiseSqrt();
+    out.pi.conservativeResize(p);
+    out.prior.conservativeResize(p);
+    out.covariance.conservativeResize(p, p);
+  }
   describe(reg, body_notes, term_fitted, L, o, out);
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return out;

@@ -20,6 +20,12 @@ struct StickSlip {
       {"sigma2", SPML_VALUE_NUMBERS, 0, HUGE_VAL, nullptr, "viscous coefficient"},
       {nullptr, 0, 0, 0, nullptr, nullptr}};
   static constexpr bool kStateful = true;
+  // Searched when diagnose fits it by simulation: the Stribeck speed as a fraction of the top
+  // speed, the bristle stiffness and damping absolute (fc, fs, sigma2 are levels it scales).
+  static constexpr spml_shape_param kShape[] = {{"vs", SPML_SHAPE_SPEED, 0.005, 0.5, 1, 0},
+                                                {"sigma0", SPML_SHAPE_ABSOLUTE, 10, 1e6, 1, 0},
+                                                {"sigma1", SPML_SHAPE_ABSOLUTE, 1e-3, 1e2, 1, 0},
+                                                {nullptr, 0, 0, 0, 0, 0}};
 
   explicit StickSlip(const EffectConfig& c) : joints(c.joints), z(c.joints.size(), 0.0) {
     const char* keys[] = {"fc", "fs", "vs", "sigma0", "sigma1", "sigma2"};

@@ -11,6 +11,26 @@ mkdir -p "$out"
 "$spml" generate --scenario simdyn-gl --test-stride 50 --out "$out/arm.h5" > /dev/null
 /usr/bin/time -f "arm 6000 x 3: %e s wall, %M KiB peak" "$spml" diagnose --model "$root/mjcf/planar_arm3.xml" --data "$out/arm.h5" \
   --test-split test_interp --out "$out/arm" --no-plots
+# Issue #22: the same arm measured as a real log (PD forward simulation, 6 s at 1 kHz, 1 %
+# torque noise, 18-bit encoders, a 4 ms torque delay, LuGre friction on joint1), 6000 rows x 3
+# after the import: the delay search, the stateful fits by simulation and the unexplained GPs.
+sed 's#</mujoco>#<custom><text name="spml.plugin.lugre" data="type=stick_slip joints=joint1 fc=4 fs=6 vs=0.1 sigma0=2000 sigma1=5 sigma2=0"/></custom></mujoco>#' \
+  "$root/mjcf/planar_arm3.xml" > "$out/arm_lugre.xml"
+"$spml" generate --model "$out/arm_lugre.xml" --duration 6.6 --seed 5 --out "$out/arm_lugre.csv" > /dev/null
+/usr/bin/python3 - "$out/arm_lugre.csv" <<'PY'
+import sys, csv
+rows = list(csv.reader(open(sys.argv[1])))
+head, body = rows[0], rows[1:]
+tau = [i for i, n in enumerate(head) if n.startswith("tau:")]
+late = [list(r) for r in body]
+for k in range(len(body)):            # the torque log reads the command of 4 ticks before
+    for i in tau: late[k][i] = body[max(0, k - 4)][i]
+csv.writer(open(sys.argv[1], "w", newline="")).writerows([head] + late)
+PY
+"$spml" import "$out/arm_lugre.csv" --t t --x 'q:joint0,q:joint1,q:joint2' --y 'tau:joint0,tau:joint1,tau:joint2' \
+  --lowpass 20 --derive --drop-edges 300 --out "$out/arm_lugre.h5" > /dev/null
+/usr/bin/time -f "arm 6000 x 3, delay + LuGre: %e s wall, %M KiB peak" "$spml" diagnose --model "$root/mjcf/planar_arm3.xml" \
+  --data "$out/arm_lugre.h5" --out "$out/arm_lugre" --no-plots 2>&1 | grep -v "^$\|WARNING"
 data=${SPML_SHARED_DATA:-$root/../shared/data}/panda
 if [ -f "$data/panda_nohand.xml" ]; then
   "$spml" import --text "$data/exciting_traj_positions.txt=q:joint{1..7}" --text "$data/exciting_traj_velocity.txt=qd:joint{1..7}" \

@@ -59,8 +59,10 @@ void add_diagnose(CLI::App& app) {
   auto out = std::make_shared<std::string>();
   auto paths = std::make_shared<std::vector<std::string>>();
   auto no_plots = std::make_shared<bool>(false);
+  auto datas = std::make_shared<std::vector<std::string>>();
   cmd->add_option("--model,-m", o->model, "MJCF or URDF of the robot (hinge/slide joints)")->required();
-  cmd->add_option("--data,-d", o->data, "spml/1 dataset with q:/qd:/qdd:<joint> inputs and tau:<joint> targets")->required();
+  cmd->add_option("--data,-d", *datas, "spml/1 dataset with q:/qd:/qdd:<joint> inputs and tau:<joint> targets; repeat for several records of one robot (fitted together, each record's test part held out)")
+      ->required()->take_all();
   cmd->add_option("--fit-split", o->fit_split, "split the causes are fitted on")->capture_default_str();
   cmd->add_option("--test-split", o->test_split,
                   "split the gain is measured on (default: the first other split; with one split, its last --holdout rows)");
@@ -81,8 +83,12 @@ void add_diagnose(CLI::App& app) {
       ->capture_default_str()->check(finite_number(0.0, 1e6));
   cmd->add_option("--ripple-gear", o->ripple_gear, "the drive's gear ratio: ripple is searched at this wavenumber only (0: search)")
       ->capture_default_str()->check(finite_number(0.0, 1e9));
+  cmd->add_option("--prior-weight", o->prior_weight, "weight of the prior toward the MJCF in the consistent fit extended.xml states when parameters are named")
+      ->capture_default_str()->check(finite_number(1e-6, 1e6));
   cmd->add_flag("--no-plots", *no_plots, "do not draw plots/ (needs /usr/bin/python3 with matplotlib)");
   cmd->callback([=] {
+    o->data = datas->front();
+    o->more_data.assign(datas->begin() + 1, datas->end());
     add_plugin_paths(*paths);
     for (const auto& w : force_plugins().warnings()) std::cerr << "spml: warning: " << w << "\n";
     o->check();

@@ -14,6 +14,10 @@ namespace spml::diagnose_detail {
 void Diagnosis::find_candidates() {
   for (const std::string& name : available_force_plugins()) {
     const spml_force_plugin& p = load_force_plugin(name);
+    if (!p.regressor && is_stateful(p)) {   // #22: fitted by simulation (stateful_fit.cc)
+      add_stateful_candidates(p);
+      continue;
+    }
     if (!p.regressor) {
       not_tried_.push_back({{"effect", name},
                             {"reason", std::string(p.advance ? "stateful" : "not linear in its parameters") +
@@ -105,7 +109,8 @@ std::vector<std::pair<std::string, std::string>> Diagnosis::config_of(const Cand
   return config;
 }
 
-BlockColumns Diagnosis::columns(const PluginInstance& inst, const SplitData& s) const {
+BlockColumns Diagnosis::columns(const PluginInstance& inst, const SplitData& s, bool filtered) const {
+  if (!inst.plugin().regressor) return simulated_columns(inst, s);   // #22: a stateful plugin (simulated, always filtered)
   const mjModel* m = reg_->model();
   const int np = inst.nparam(), O = static_cast<int>(s.split.Y.cols());
   Eigen::MatrixXd C = Eigen::MatrixXd::Zero(s.N * O, np);
@@ -124,7 +129,7 @@ BlockColumns Diagnosis::columns(const PluginInstance& inst, const SplitData& s) 
   }
   if (!C.allFinite())
     throw PluginError("plugin '" + std::string(inst.plugin().name) + "' gave non-finite regressor values on split '" + s.name + "'");
-  filter_stacked(s.sos, C, s.N);
+  if (filtered) filter_stacked(s.sos, C, s.N, s.runs);
   return BlockColumns::from_dense(C, s.N, O);
 }
 
@@ -134,8 +139,49 @@ BlockColumns Diagnosis::columns_of(const Candidate& c, const SplitData& s) const
   return columns(inst, s);
 }
 
+// A term whose force opposes the joint's motion at every row of the fit split (Coulomb, Stribeck,
+// viscous, one direction of asymmetric friction, a band) is friction: fitted with a negative
+// coefficient it would push the joint along its motion, feeding it energy, which no friction
+// does. Such a fit is the regression spending a dissipative column on something else (rounding,
+// a constraint's stick phases), not a cause. Terms that are not sign-definite (ripple, offset)
+// are free. Checked on the unfiltered columns: the filter smears signs at reversals.
+std::string Diagnosis::injects_energy(const Candidate& c, const Eigen::VectorXd& theta) const {
+  PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
+  const BlockColumns cols = columns(inst, fit_, false);
+  const Eigen::MatrixXd C = cols.dense();
+  const auto names = inst.param_names();
+  const Eigen::Index N = fit_.N;
+  for (Eigen::Index k = 0; k < theta.size() && k < C.cols(); ++k) {
+    if (theta[k] >= 0) continue;
+    bool opposes = true, acts = false;
+    for (Eigen::Index o = 0; o * N < C.rows() && opposes; ++o) {
+      const auto qd = fit_.split.X.col(fit_.cols->qd[static_cast<size_t>(out_joint_index_[static_cast<size_t>(o)])]);
+      for (Eigen::Index i = 0; i < N; ++i) {
+        // C is the column in inverse dynamics (tau = ... - force): the force's power is -C qd.
+        const double power = -C(o * N + i, k) * qd[i];
+        opposes &= power <= 0;
+        acts |= power < 0;
+      }
+    }
+    if (opposes && acts)
+      return names[static_cast<size_t>(k)] + " = " + fmt(theta[k]) + " < 0 on a term that opposes the motion at every sample: negative "
+             "friction would feed the joint energy, not dissipate it";
+  }
+  return "";
+}
+
 std::string Diagnosis::refused(int candidate, const Eigen::VectorXd& theta) const {
   const Candidate& c = cands_[static_cast<size_t>(candidate)];
+  if (c.stateful) return theta.size() == 1 && theta[0] > 0 ? "" : "the simulated force would enter with a negative amplitude";   // #22
+  // A Stribeck curve falls from its break-away level fs to the Coulomb level fc. Fitted with
+  // fs < fc it is friction lower at low speed: the stick phases of Coulomb friction (the joint
+  // held while the applied torque is below fc, read through estimated velocities), not Stribeck.
+  if (std::string(c.plugin->name) == "stribeck")
+    for (Eigen::Index k = 0; k + 1 < theta.size(); k += 2)
+      if (!(theta[k + 1] >= theta[k]))
+        return "fs " + fmt(theta[k + 1]) + " < fc " + fmt(theta[k]) + ": not a Stribeck curve (friction lower at low speed: stick phases)";
+  const std::string pumping = injects_energy(c, theta);
+  if (!pumping.empty()) return pumping;
   try {
     PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
     inst.set_params(theta);

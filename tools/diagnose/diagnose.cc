@@ -58,10 +58,11 @@ namespace {
 namespace fs = std::filesystem;
 // In the order they are moved into place: report.json last, so that a reader who sees it sees
 // the rest of the same run.
-const char* const kOutputs[] = {"extended.xml", "series.csv", "report.md", "report.json"};
+const char* const kOutputs[] = {"extended.xml", "series.csv", "unexplained.csv", "report.md", "report.json"};
 
 void refuse_inputs_among_outputs(const DiagnoseOptions& o, const fs::path& out) {
   std::vector<std::string> inputs = {o.model, o.data};
+  inputs.insert(inputs.end(), o.more_data.begin(), o.more_data.end());
   inputs.insert(inputs.end(), o.cross.begin(), o.cross.end());
   const fs::path plots = fs::weakly_canonical(out / "plots");
   for (const auto& in : inputs) {
@@ -120,6 +121,7 @@ void DiagnoseOptions::check() const {
   in("rollouts", rollouts, 0, 10000);
   in("min_ripple_periods", min_ripple_periods, 0, 1e6);
   in("ripple_gear", ripple_gear, 0, 1e9);
+  in("prior_weight", prior_weight, 1e-6, 1e6);
 }
 
 DiagnoseResult diagnose(const DiagnoseOptions& options, const std::string& out_dir,

@@ -1,29 +1,41 @@
 // The state one diagnose run carries from stage to stage. Each stage lives in its own file, in
 // the order the data flows:
 //   load.cc        model, dataset, splits (fit / test / cross)
+//   runs.cc        several records of one robot stacked, their boundaries kept
 //   prepare.cc     one split made ready: columns, base regressor, targets, the model's prediction,
 //                  the parallel filter (filtering.cc)
 //   estimate.cc    least-squares refits of the base parameters and causes, residuals on any split
 //   candidates.cc  the force plugins as candidate causes, and their regressor columns
 //   shape_search.cc  the shape of one candidate (grid, zoom, plateau middle, local polish)
 //   selection.cc   forward selection, backward elimination, the `parameters` decision
+//   written_parameters.cc  the physically consistent parameters extended.xml states
+//   confirm.cc     causes whose written form makes rollouts worse beyond noise are rejected
 //   verify.cc      the written model: extended.xml, its own inverse dynamics, rollouts
 //   report_json.cc report.json (causes, metrics, cross-tests) and series.csv
+// Issue #22 (stages of their own, hooked in where marked "#22"):
+//   delay.cc       an offset between torques and states, estimated and corrected first
+//   stateful_fit.cc  stateful plugins (LuGre stick_slip) fitted by simulation along the log
+//   unexplained.cc the GP (ARD) on the final residual: structure no candidate explains
 #pragma once
 
 #include <Eigen/Core>
 #include <chrono>
+#include <deque>
+#include <sstream>
+#include <functional>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <set>
 #include <string>
 #include <utility>
 #include <vector>
 
 #include "design.h"
-#include "extended_mjcf.h"
+#include "spml/envs/mjcf_edit.h"
 #include "filtering.h"
 #include "spml/diagnose.h"
+#include "spml/envs/consistent_identification.h"
 #include "spml/envs/mjcf_regressor.h"
 #include "spml/force_effects.h"
 
@@ -46,6 +58,7 @@ struct SplitData {
   Eigen::VectorXd friction;       // MuJoCo's frictionloss torque - the regressor's fl*sign(qd), stacked (in given; empty: none)
   Eigen::Index N = 0;
   std::vector<Section> sos;       // the parallel filter on this split's time base (empty: none)
+  std::vector<Eigen::Index> runs; // first rows of the records after the first (several --data)
 };
 
 // A candidate cause: one plugin on one joint, with its shape chosen.
@@ -62,6 +75,21 @@ struct Candidate {
   bool skipped = false;           // its plugin failed (non-finite columns): not a candidate
   Gain gain;
   double delta_bic = -std::numeric_limits<double>::infinity();
+  // #22: a stateful plugin fitted by simulation (stateful_fit.cc): every key is a shape value,
+  // fit_cols is its simulated force (one column).
+  bool stateful = false;
+  std::vector<double> stateful_se;            // per shape key, absolute
+  std::vector<std::string> not_identifiable;  // keys with a relative standard error above 50 %
+};
+
+bool is_stateful(const spml_force_plugin& p);   // #22: advance/reset and no regressor
+
+// #22: the offset between torques and states (delay.cc).
+struct DelayResult {
+  double seconds = 0, stderr_ = std::numeric_limits<double>::infinity(), delta_bic = 0, range = 0;
+  bool named = false;
+  std::string why;
+  Eigen::VectorXd y0_fit, y0_test;   // the fit and test targets before the correction (baseline)
 };
 
 struct Cause {
@@ -69,6 +97,16 @@ struct Cause {
   double delta_bic;
   std::string superseded_by;
 };
+
+// The parameters extended.xml states when `parameters` is named (written_parameters.cc).
+struct WrittenParameters {
+  ConsistentIdentification id;      // standard parameters; id.extra: the kept effects' coefficients
+  Eigen::VectorXd prediction_fit;   // its torques on the fit split (through the parallel filter)
+};
+nlohmann::json written_parameters_json(const WrittenParameters& w);
+
+// "effect@joint" (or "parameters") of every cause rejected in simulation (confirm.cc).
+nlohmann::json rejected_causes(const nlohmann::json& causes);
 
 // The split with its torque columns in `order` (matched by name); throws naming `file` when
 // the names differ.
@@ -99,13 +137,15 @@ class Diagnosis {
  private:
   // load.cc
   void load();
-  void choose_splits(Split& fit_part, Split& test_part);
+  void choose_splits(const Dataset& ds, const std::string& file, Split& fit_part, Split& test_part);
+  // runs.cc
+  void load_more_records(Split& fit_part, Split& test_part, std::vector<Eigen::Index>& fit_runs, std::vector<Eigen::Index>& test_runs);
   void load_cross();
   void map_outputs();
   void note_frictionloss();
   Eigen::VectorXd frictionloss_correction(const SplitData& d) const;
   // prepare.cc
-  SplitData prepare(const Split& s);
+  SplitData prepare(const Split& s, const std::vector<Eigen::Index>& runs = {});
   void plan_parallel_filter();
   void apply_filter(SplitData& d) const;
   // candidates.cc
@@ -114,11 +154,12 @@ class Diagnosis {
                       const std::vector<std::pair<std::string, std::string>>& fixed);
   bool bound_wavenumber(Candidate& c, double stroke);
   std::vector<std::pair<std::string, std::string>> config_of(const Candidate& c, const std::vector<double>& shape) const;
-  BlockColumns columns(const PluginInstance& inst, const SplitData& s) const;
+  BlockColumns columns(const PluginInstance& inst, const SplitData& s, bool filtered = true) const;
   BlockColumns columns_of(const Candidate& c, const SplitData& s) const;
   // "" when the plugin accepts its fitted parameters (written back through write_config and
   // created again), else its reason: a negative band level is not a friction band.
   std::string refused(int candidate, const Eigen::VectorXd& theta) const;
+  std::string injects_energy(const Candidate& c, const Eigen::VectorXd& theta) const;
   // shape_search.cc
   double search_shape(Candidate& c, const Fit& current);
   // estimate.cc
@@ -141,15 +182,43 @@ class Diagnosis {
   nlohmann::json cross_errors(const std::vector<int>& causes, bool base_free, const Fit& f) const;
   void build_report(const std::string& out_dir);
   nlohmann::json parameters_cause(const Fit& final_fit, MjcfEdits& edits, std::vector<std::string>& notes) const;
-  void parameter_edits(const Eigen::VectorXd& pi, MjcfEdits& edits, std::vector<std::string>& notes) const;
-  void inertial_edit(const Eigen::VectorXd& pi, const std::string& body, MjcfEdits& edits, std::vector<std::string>& notes) const;
   nlohmann::json effect_cause(size_t i, const Fit& final_fit, bool free, MjcfEdits& edits, std::vector<std::string>& notes,
                               nlohmann::json& cross_after) const;
   nlohmann::json cross_report(const Fit& final_fit, bool free, const nlohmann::json& cross_after) const;
   void write_series(const std::string& out_dir, const Eigen::VectorXd& final_pred_fit, const Eigen::VectorXd& final_test) const;
+  // written_parameters.cc
+  WrittenParameters consistent_parameters() const;
+  // confirm.cc
+  bool confirm_in_simulation(const std::string& ext_path, MjcfEdits& edits);
+  void note_rejections(const MjcfEdits& edits, std::vector<std::string>& notes);
+  // delay.cc (#22)
+  void estimate_delay();
+  void delay_decide(double d, const std::function<Eigen::VectorXd(double)>& projected, int rank);
+  double uniform_step(const SplitData& s) const;
+  Eigen::VectorXd targets_at(const SplitData& s, double d) const;
+  BlockColumns coulomb_nuisance(const SplitData& s) const;
+  nlohmann::json delay_report() const;
+  nlohmann::json delay_cause() const;
+  // stateful_fit.cc (#22)
+  void add_stateful_candidates(const spml_force_plugin& p);
+  BlockColumns simulated_columns(const PluginInstance& inst, const SplitData& s) const;
+  double stateful_drop(const Candidate& c, const Fit& current, const std::vector<double>& x, Eigen::VectorXd* force = nullptr) const;
+  void fit_stateful(Candidate& c, const Fit& current);
+  void stateful_errors(Candidate& c, const Fit& current, const std::vector<double>& x);
+  void stateful_report(const Candidate& c, double amplitude, nlohmann::json& params, nlohmann::json& se, nlohmann::json& j) const;
+  Eigen::VectorXd written_stateful(const SplitData& s, const mjModel* ext) const;
+  // unexplained.cc (#22)
+  nlohmann::json unexplained_joint(size_t o, const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test, std::ostringstream& csv) const;
+  nlohmann::json unexplained(const std::string& out_dir, const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test) const;
   // verify.cc
   std::pair<Eigen::VectorXd, Eigen::VectorXd> verify(const std::string& out_dir, MjcfEdits& edits, std::vector<std::string>& notes,
                                                      const Eigen::VectorXd& final_pred_fit);
+  std::pair<Eigen::VectorXd, Eigen::VectorXd> write_scored(const std::string& ext_path, MjcfEdits& e, std::vector<std::string>& n);
+  void choose_partial(const std::string& ext_path, MjcfEdits& edits, std::vector<std::string>& notes,
+                      std::pair<Eigen::VectorXd, Eigen::VectorXd>& written);
+  bool refit_written_effects(const std::string& ext_path, MjcfEdits& edits, std::vector<std::string>& notes);
+  void guard_held_out(const std::string& ext_path, MjcfEdits& edits, std::vector<std::string>& notes,
+                      std::pair<Eigen::VectorXd, Eigen::VectorXd>& written);
   void run_rollouts(const std::string& ext_path, std::vector<std::string>& notes);
   Eigen::VectorXd written_prediction(const MjcfRegressor& ext, const MjcfRegressor::Base& ebase, const SplitData& s) const;
 
@@ -170,9 +239,13 @@ class Diagnosis {
   bool parameters_named_ = false;
   double parameters_delta_bic_ = 0, parameters_n_eff_ = 0;
   int parameters_contradicted_ = 0;
-  mutable bool parameters_partial_ = false;   // some re-identified inertial could not be written   // base parameters beyond 3 robust standard errors
+  mutable bool parameters_partial_ = false;   // some re-identified parameter has no MJCF attribute written
+  std::optional<WrittenParameters> written_;  // set in build_report when `parameters` is named
   std::vector<std::string> notes_;
   FilterPlan filter_plan_;
+  DelayResult delay_;   // #22
+  mutable std::shared_ptr<mjData> sim_data_;   // #22: the state the stateful simulations read (one thread)
+  std::deque<spml_shape_param> synthesized_;   // #22: the level keys of stateful plugins, searched as shapes
 };
 
 }  // namespace spml::diagnose_detail

@@ -75,18 +75,24 @@ std::vector<Section> plan_sections(const FilterPlan& plan, const Split& s) {
   return butterworth_lowpass(plan.lowpass.order, plan.lowpass.cutoff_hz, 1.0 / dt);
 }
 
-void filter_stacked(const std::vector<Section>& sos, Eigen::MatrixXd& A, Eigen::Index N) {
+void filter_stacked(const std::vector<Section>& sos, Eigen::MatrixXd& A, Eigen::Index N, const std::vector<Eigen::Index>& runs) {
   if (sos.empty() || N < 2) return;
+  std::vector<Eigen::Index> bounds{0};
+  bounds.insert(bounds.end(), runs.begin(), runs.end());
+  bounds.push_back(N);
   for (Eigen::Index c = 0; c < A.cols(); ++c)
-    for (Eigen::Index o = 0; o * N < A.rows(); ++o) {
-      const Eigen::VectorXd seg = A.col(c).segment(o * N, N);
-      if (seg.cwiseAbs().maxCoeff() > 0) A.col(c).segment(o * N, N) = filtfilt(sos, seg);
-    }
+    for (Eigen::Index o = 0; o * N < A.rows(); ++o)
+      for (size_t r = 0; r + 1 < bounds.size(); ++r) {
+        const Eigen::Index at = o * N + bounds[r], len = bounds[r + 1] - bounds[r];
+        if (len < 2) continue;
+        const Eigen::VectorXd seg = A.col(c).segment(at, len);
+        if (seg.cwiseAbs().maxCoeff() > 0) A.col(c).segment(at, len) = filtfilt(sos, seg);
+      }
 }
 
-void filter_stacked(const std::vector<Section>& sos, Eigen::VectorXd& b, Eigen::Index N) {
+void filter_stacked(const std::vector<Section>& sos, Eigen::VectorXd& b, Eigen::Index N, const std::vector<Eigen::Index>& runs) {
   Eigen::MatrixXd B = b;
-  filter_stacked(sos, B, N);
+  filter_stacked(sos, B, N, runs);
   b = B.col(0);
 }
 

@@ -34,8 +34,10 @@ FilterPlan plan_filter(const Dataset& ds, const std::vector<Eigen::VectorXd>& q,
 // the cut-off lies at or above 0.4 of its sampling rate: nothing left to filter).
 std::vector<Section> plan_sections(const FilterPlan& plan, const Split& s);
 
-// Filters every column of a stacked matrix (rows o*N .. o*N+N-1 are output o) segment-wise.
-void filter_stacked(const std::vector<Section>& sos, Eigen::MatrixXd& A, Eigen::Index N);
-void filter_stacked(const std::vector<Section>& sos, Eigen::VectorXd& b, Eigen::Index N);
+// Filters every column of a stacked matrix (rows o*N .. o*N+N-1 are output o) segment-wise;
+// `runs` (first rows of the runs after the first, when several records are stacked) splits each
+// output's rows further, so that no filter runs across the junction of two records.
+void filter_stacked(const std::vector<Section>& sos, Eigen::MatrixXd& A, Eigen::Index N, const std::vector<Eigen::Index>& runs = {});
+void filter_stacked(const std::vector<Section>& sos, Eigen::VectorXd& b, Eigen::Index N, const std::vector<Eigen::Index>& runs = {});
 
 }  // namespace spml::diagnose_detail

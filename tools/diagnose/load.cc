@@ -26,12 +26,14 @@ void Diagnosis::load() {
   ds_ = read_dataset(opt_.data);
   const std::string where = opt_.data + ": ";
   Split fit_part, test_part;
-  choose_splits(fit_part, test_part);
+  choose_splits(ds_, opt_.data, fit_part, test_part);
   test_part = in_column_order(test_part, fit_part.y_columns, opt_.data);
-  fit_ = prepare(fit_part);
+  std::vector<Eigen::Index> fit_runs, test_runs;
+  load_more_records(fit_part, test_part, fit_runs, test_runs);
+  fit_ = prepare(fit_part, fit_runs);
   map_outputs();
   plan_parallel_filter();
-  test_ = prepare(test_part);
+  test_ = prepare(test_part, test_runs);
   load_cross();
   if (fit_.split.y_columns != test_.split.y_columns)
     throw DatasetError(where + "the fit and test splits have different torque columns");
@@ -54,19 +56,19 @@ void Diagnosis::load() {
 
 // The fit split, and the test split: the one named, else the first other split, else the
 // last rows of the fit split.
-void Diagnosis::choose_splits(Split& fit_part, Split& test_part) {
-  const Split& fit = ds_.get(opt_.fit_split);
-  const std::string where = opt_.data + ": ";
+void Diagnosis::choose_splits(const Dataset& ds, const std::string& file, Split& fit_part, Split& test_part) {
+  const Split& fit = ds.get(opt_.fit_split);
+  const std::string where = file + ": ";
   fit_part = fit;
   if (!opt_.test_split.empty()) {
     if (opt_.test_split == opt_.fit_split)
       throw DatasetError(where + "the test split is the fit split ('" + opt_.fit_split +
                          "'): the gain must be measured on data the fit never saw");
-    test_part = ds_.get(opt_.test_split);
+    test_part = ds.get(opt_.test_split);
     test_name_ = opt_.test_split;
     return;
   }
-  for (const Split& s : ds_.splits)
+  for (const Split& s : ds.splits)
     if (s.name != opt_.fit_split) {
       test_part = s;
       test_name_ = s.name;
@@ -78,7 +80,8 @@ void Diagnosis::choose_splits(Split& fit_part, Split& test_part) {
   fit_part = fit.slice(0, k, opt_.fit_split);
   test_name_ = opt_.fit_split + "[last " + fmt(100 * opt_.holdout, 3) + "%]";
   test_part = fit.slice(k, n, test_name_);
-  notes_.push_back("the dataset has one split: its last " + fmt(100 * opt_.holdout, 3) + " % of rows (in time order) are held out as the test split");
+  const std::string note = "the dataset has one split: its last " + fmt(100 * opt_.holdout, 3) + " % of rows (in time order) are held out as the test split";
+  if (std::find(notes_.begin(), notes_.end(), note) == notes_.end()) notes_.push_back(note);
 }
 
 // The split with its torque columns in the fit split's order, matched by name.

@@ -5,10 +5,11 @@
 
 namespace spml::diagnose_detail {
 
-SplitData Diagnosis::prepare(const Split& s) {
+SplitData Diagnosis::prepare(const Split& s, const std::vector<Eigen::Index>& runs) {
   SplitData d;
   d.name = s.name;
   d.split = s;
+  d.runs = runs;
   const std::string where = opt_.data + ": ";
   try {
     d.cols = std::make_unique<JointColumns>(*reg_, s);
@@ -63,8 +64,8 @@ void Diagnosis::plan_parallel_filter() {
 void Diagnosis::apply_filter(SplitData& d) const {
   d.sos = plan_sections(filter_plan_, d.split);
   if (d.sos.empty()) return;
-  for (auto& part : d.base.parts) filter_stacked(d.sos, part, d.N);
-  if (filter_plan_.torques) filter_stacked(d.sos, d.b, d.N);
+  for (auto& part : d.base.parts) filter_stacked(d.sos, part, d.N, d.runs);
+  if (filter_plan_.torques) filter_stacked(d.sos, d.b, d.N, d.runs);
   d.given = d.base.times(base_.model_values);
   if (d.friction.size()) {
     filter_stacked(d.sos, d.friction, d.N);

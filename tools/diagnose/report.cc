@@ -39,9 +39,11 @@ std::string report_summary(const nlohmann::json& r) {
   int rank = 0;
   for (const auto& c : r["causes"]) {
     s << "  " << ++rank << ". " << c["effect"].get<std::string>();
-    if (c["effect"] != "parameters") s << " on " << c["joints"][0].get<std::string>();
+    if (c["effect"] == "delay") s << " " << num(1e3 * c["params"]["seconds"].get<double>()) << " ms";   // #22
+    else if (c["effect"] != "parameters") s << " on " << c["joints"][0].get<std::string>();
     s << "  (dBIC " << num(c["delta_bic"].get<double>(), 5) << ", test error after " << pct(c["rel_error_test_after_all"].get<double>()) << ")";
     if (c.contains("superseded_by")) s << "  superseded by " << c["superseded_by"].get<std::string>();
+    if (c.contains("rejected")) s << "  REJECTED: " << c["rejected"].value("summary", "in simulation, rollouts worse with it");
     s << "\n";
   }
   if (r["causes"].empty()) s << "  no cause found: nothing passes the evidence and held-out tests\n";
@@ -50,6 +52,10 @@ std::string report_summary(const nlohmann::json& r) {
     s << "  cross " << c["data"].get<std::string>() << " '" << c["split"].get<std::string>() << "': " << pct(c["rel_error_given"].get<double>())
       << " as given -> " << pct(c["rel_error_final"].get<double>()) << "\n";
   for (const auto& n : r["not_identifiable"]) s << "  not identifiable: " << n["joint"].get<std::string>() << "\n";
+  for (const auto& u : r.value("unexplained", nlohmann::json::array()))   // #22
+    if (u.contains("share"))
+      s << "  unexplained on " << u["joint"].get<std::string>() << ": a GP on the residual explains " << pct(u["share"].get<double>())
+        << " of it held out, mostly through " << u["inputs"][0].get<std::string>() << "\n";
   return s.str();
 }
 
@@ -86,6 +92,7 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
     s << " on " << joints << " - ΔBIC " << num(c["delta_bic"].get<double>(), 5) << ", test error after "
       << pct(c["rel_error_test_after_all"].get<double>());
     if (c.contains("superseded_by")) s << " (superseded by " << c["superseded_by"].get<std::string>() << ")";
+    if (c.contains("rejected")) s << " - **rejected, not in extended.xml**: " << c["rejected"].value("reason", "");
     s << "\n   - " << params_text(c, "\n   - ") << "\n";
     if (c.contains("not_identifiable") && !c["not_identifiable"].empty())
       s << "   - not identifiable from this data: " << c["not_identifiable"].size() << " base parameter(s)\n";
@@ -112,6 +119,8 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
     for (const auto& n : r["notes"]) s << "- " << n.get<std::string>() << "\n";
   }
   if (with_plots) s << "\n## Plots\n\n![residuals](plots/residuals.png)\n\n![states](plots/states.png)\n";
+  if (with_plots && r.value("unexplained", nlohmann::json::array()).size() > 0)   // #22
+    s << "\n![unexplained](plots/unexplained.png)\n";
   return s.str();
 }
 

@@ -9,18 +9,11 @@
 #include <sstream>
 
 #include "diagnosis.h"
+#include "spml/envs/identified_model.h"
 #include "spml/matrix_file.h"
 
 namespace spml::diagnose_detail {
 namespace {
-
-// Standard MJCF quantities from the base parameters: beta = pi[independent] + Kd pi[dependent],
-// so a change of beta is carried by the independent parameter of each group.
-Eigen::VectorXd standard_from_base(const MjcfRegressor& reg, const MjcfRegressor::Base& base, const Eigen::VectorXd& delta) {
-  Eigen::VectorXd pi = reg.model_params();
-  for (int i = 0; i < base.rank; ++i) pi[base.independent[static_cast<size_t>(i)]] += delta[i];
-  return pi;
-}
 
 // The after-metrics of a cause, copied from metrics() under the report's names.
 void put_after(nlohmann::json& j, const nlohmann::json& after) {
@@ -104,74 +97,14 @@ nlohmann::json Diagnosis::parameters_cause(const Fit& final_fit, MjcfEdits& edit
                    {"params", params}, {"stderr", se}, {"prior", prior}, {"not_identifiable", undetermined},
                    {"delta_bic", parameters_delta_bic_}};
   put_after(j, after);
-  parameter_edits(standard_from_base(*reg_, base_, final_fit.coef.head(base_.rank)), edits, notes);
+  // What is written: the consistent fit (written_parameters.cc), every fitted body realizable.
+  const size_t before = notes.size();
+  const MjcfEdits id_edits = identified_model_edits(*reg_, written_->id, notes);
+  parameters_partial_ = notes.size() > before;
+  edits.joint_attributes = id_edits.joint_attributes;
+  edits.inertials = id_edits.inertials;
+  j["written"] = written_parameters_json(*written_);
   return j;
-}
-
-// The corrected MJCF quantities: joint attributes directly, body inertials when consistent.
-void Diagnosis::parameter_edits(const Eigen::VectorXd& pi, MjcfEdits& edits, std::vector<std::string>& notes) const {
-  const Eigen::VectorXd& pi0 = reg_->model_params();
-  const auto& names = reg_->param_names();
-  std::set<std::string> bodies;
-  for (size_t k = 0; k < names.size(); ++k) {
-    if (pi[static_cast<Eigen::Index>(k)] == pi0[static_cast<Eigen::Index>(k)]) continue;
-    const std::string& nm = names[k];
-    const auto colon = nm.find(':');
-    const std::string kind = nm.substr(0, colon), what = nm.substr(colon + 1);
-    if (kind == "armature" || kind == "damping" || kind == "stiffness" || kind == "coulomb") {
-      if (mj_name2id(reg_->model(), mjOBJ_JOINT, what.c_str()) >= 0) {
-        // MuJoCo needs these >= 0 (a negative armature makes the mass matrix singular, a
-        // negative damping feeds energy in): an estimate below 0 is written as 0, and said.
-        double v = pi[static_cast<Eigen::Index>(k)];
-        if (v < 0 && kind != "stiffness") {
-          notes.push_back(nm + " is estimated at " + fmt(v) + " (< 0, not physical): written as 0");
-          v = 0;
-        }
-        edits.joint_attributes[what][kind == "coulomb" ? "frictionloss" : kind] = v;
-      } else
-        notes.push_back(nm + " changed but is a tendon quantity: not written");
-    } else if (kind == "plugin") {
-      notes.push_back(nm + " (a force plugin of the model) changed: not written, edit its declaration by hand");
-    } else {
-      bodies.insert(what);
-    }
-  }
-  for (const auto& body : bodies) inertial_edit(pi, body, edits, notes);
-}
-
-void Diagnosis::inertial_edit(const Eigen::VectorXd& pi, const std::string& body, MjcfEdits& edits, std::vector<std::string>& notes) const {
-  const auto& names = reg_->param_names();
-  auto at = [&](const std::string& k) {
-    const auto it = std::find(names.begin(), names.end(), k + ":" + body);
-    return pi[it - names.begin()];
-  };
-  const double mass = at("m");
-  Eigen::Vector3d h(at("mx"), at("my"), at("mz"));
-  Eigen::Matrix3d I;
-  I << at("Ixx"), at("Ixy"), at("Ixz"), at("Ixy"), at("Iyy"), at("Iyz"), at("Ixz"), at("Iyz"), at("Izz");
-  std::string why;
-  MjcfEdits::Inertial in;
-  in.body = body;
-  if (!(mass > 0)) {
-    why = "mass " + fmt(mass);
-  } else {
-    const Eigen::Vector3d c = h / mass;
-    const Eigen::Matrix3d Ic = I - mass * (c.squaredNorm() * Eigen::Matrix3d::Identity() - c * c.transpose());
-    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(Ic);
-    const auto& l = eig.eigenvalues();
-    if (!(l.minCoeff() > 0) || l[0] + l[1] < l[2]) why = "principal moments " + fmt(l[0]) + ", " + fmt(l[1]) + ", " + fmt(l[2]);
-    in.mass = mass;
-    for (int k = 0; k < 3; ++k) in.pos[k] = c[k];
-    const double full[6] = {Ic(0, 0), Ic(1, 1), Ic(2, 2), Ic(0, 1), Ic(0, 2), Ic(1, 2)};
-    std::copy(full, full + 6, in.fullinertia);
-  }
-  if (why.empty())
-    edits.inertials.push_back(in);
-  else {
-    parameters_partial_ = true;
-    notes.push_back("body '" + body + "': the re-identified inertial parameters are not physically consistent (" + why +
-                    "), so its inertial is not written; the extended model keeps the MJCF's");
-  }
 }
 
 // Effect cause i, in the order chosen, with its after-metrics along the path (causes superseded
@@ -202,20 +135,35 @@ nlohmann::json Diagnosis::effect_cause(size_t i, const Fit& final_fit, bool free
   }
   PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
   const auto pnames = inst.param_names();
-  nlohmann::json params = nlohmann::json::object(), se = nlohmann::json::object(), shape = nlohmann::json::object();
-  Eigen::VectorXd theta(inst.nparam());
-  for (int k = 0; k < inst.nparam(); ++k) {
-    theta[k] = src.determined[static_cast<size_t>(off + k)] ? src.coef[off + k] : 0.0;
-    params[pnames[static_cast<size_t>(k)]] = theta[k];
-    se[pnames[static_cast<size_t>(k)]] = src.stderr_[off + k];
+  nlohmann::json params = nlohmann::json::object(), se = nlohmann::json::object(), shape = nlohmann::json::object(), j_written;
+  nlohmann::json stateful_extra = nlohmann::json::object();
+  // Written with the consistent parameters' joint fit (when parameters are named): its amplitudes go into the declaration.
+  const Eigen::Index woff = off - (free ? base_.rank : 0);
+  const bool joint_fit = kept && written_;
+  if (c.stateful) {   // #22: every key fitted by simulation (stateful_fit.cc); written as fitted
+    stateful_report(c, joint_fit ? written_->id.extra[woff] : src.coef[off], params, se, stateful_extra);
+  } else {
+    Eigen::VectorXd theta(inst.nparam());
+    for (int k = 0; k < inst.nparam(); ++k) {
+      theta[k] = src.determined[static_cast<size_t>(off + k)] ? src.coef[off + k] : 0.0;
+      params[pnames[static_cast<size_t>(k)]] = theta[k];
+      se[pnames[static_cast<size_t>(k)]] = src.stderr_[off + k];
+    }
+    for (size_t k = 0; k < c.shape.size(); ++k) shape[c.shape[k]->key] = c.shape_values[k];
+    if (joint_fit) {
+      nlohmann::json pw = nlohmann::json::object();
+      for (int k = 0; k < inst.nparam(); ++k) pw[pnames[static_cast<size_t>(k)]] = theta[k] = written_->id.extra[woff + k];
+      j_written = pw;
+    }
+    inst.set_params(theta);
   }
-  for (size_t k = 0; k < c.shape.size(); ++k) shape[c.shape[k]->key] = c.shape_values[k];
-  inst.set_params(theta);
   const std::string config = inst.config_text();
   nlohmann::json j{{"effect", c.plugin->name}, {"joints", {c.joint_name}}, {"params", params}, {"stderr", se}, {"shape", shape},
                    {"delta_bic", cause.delta_bic}};
+  j.update(stateful_extra);
   put_after(j, after);
   if (!kept) j["superseded_by"] = cause.superseded_by;
+  if (!j_written.is_null()) j["params_written"] = j_written;
   if (kept) {
     const std::string name = "spml.plugin.diagnosed_" + std::string(c.plugin->name) + "_" + c.joint_name;
     if (config.empty())
@@ -248,9 +196,15 @@ nlohmann::json Diagnosis::cross_report(const Fit& final_fit, bool free, const nl
 void Diagnosis::build_report(const std::string& out_dir) {
   auto t0 = Clock::now();
   nlohmann::json& R = result_.report;
-  R["format"] = "spml-diagnose/2";
+  R["format"] = "spml-diagnose/3";   // #22: /3 adds delay, unexplained (README)
   R["model"] = opt_.model;
   R["data"] = opt_.data;
+  if (!opt_.more_data.empty()) {
+    nlohmann::json runs = {opt_.data};
+    for (const auto& f : opt_.more_data) runs.push_back(f);
+    R["data_runs"] = runs;
+    R["rows_per_run"] = {{"fit_starts", fit_.runs}, {"test_starts", test_.runs}};
+  }
   R["fit_split"] = opt_.fit_split;
   R["test_split"] = test_name_;
   R["joints"] = out_joints_;
@@ -260,7 +214,9 @@ void Diagnosis::build_report(const std::string& out_dir) {
   R["base_parameters"] = {{"standard", reg_->param_names().size()}, {"rank", base_.rank},
                           {"tolerance", base_.tolerance}, {"smallest_kept", base_.smallest_kept},
                           {"largest_dropped", base_.largest_dropped}, {"close_call", base_.close_call()}};
-  R["baseline"] = metrics(fit_.y0, test_.y0);
+  // #22: the baseline is the data as measured, before a delay correction (delay.cc).
+  R["baseline"] = delay_.named ? metrics(delay_.y0_fit, delay_.y0_test) : metrics(fit_.y0, test_.y0);
+  R["delay"] = delay_report();
   R["parallel_filter"] = {{"source", filter_plan_.source == FilterPlan::Source::recorded   ? "recorded"
                                      : filter_plan_.source == FilterPlan::Source::detected ? "detected"
                                                                                            : "none"},
@@ -276,7 +232,12 @@ void Diagnosis::build_report(const std::string& out_dir) {
   nlohmann::json causes = nlohmann::json::array(), cross_after = nlohmann::json::array();
   MjcfEdits edits;
   std::vector<std::string> notes = notes_;
+  if (delay_.named) {   // #22: the delay comes first, it was corrected before everything else
+    causes.push_back(delay_cause());
+    cross_after.push_back(cross_errors({}, false, Fit{}));
+  }
   if (free) {
+    written_ = consistent_parameters();
     causes.push_back(parameters_cause(final_fit, edits, notes));
     cross_after.push_back(cross_errors({}, true, refit({}, true)));
   }
@@ -284,6 +245,7 @@ void Diagnosis::build_report(const std::string& out_dir) {
   R["causes"] = causes;
   // The fit's own prediction; `final` is set by verify() from the written model itself.
   R["final_internal"] = metrics(final_fit.residual, final_test);
+  R["unexplained"] = unexplained(out_dir, final_fit.residual, final_test);   // #22 (unexplained.cc)
   if (!cross_.empty()) R["cross"] = cross_report(final_fit, free, cross_after);
   nlohmann::json still = nlohmann::json::array();
   for (size_t j = 0; j < still_.size(); ++j)
@@ -293,7 +255,8 @@ void Diagnosis::build_report(const std::string& out_dir) {
   R["not_identifiable"] = still;
   R["not_tried"] = not_tried_;
   result_.timings.outputs += since(t0);
-  const auto written = verify(out_dir, edits, notes, fit_.b - final_fit.residual);
+  // extended_check: the written file against the prediction of the parameters it states.
+  const auto written = verify(out_dir, edits, notes, written_ ? written_->prediction_fit : Eigen::VectorXd(fit_.b - final_fit.residual));
   R["notes"] = notes;
   t0 = Clock::now();
   write_series(out_dir, written.first, written.second);

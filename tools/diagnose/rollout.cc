@@ -10,7 +10,7 @@
 
 namespace spml::diagnose_detail {
 
-RolloutResult rollout(const std::string& mjcf_path, const Split& s, int windows, double horizon) {
+RolloutResult rollout(const std::string& mjcf_path, const Split& s, int windows, double horizon, const std::vector<Eigen::Index>& runs) {
   ModelPtr model = load_mjcf(mjcf_path);
   mjModel* m = model.get();
   m->opt.disableflags |= mjDSBL_CONTACT;
@@ -31,15 +31,23 @@ RolloutResult rollout(const std::string& mjcf_path, const Split& s, int windows,
     if (qc.back() < 0 || qdc.back() < 0) throw std::runtime_error("split '" + s.name + "' lacks q:/qd:" + name);
   }
   out.position_error.assign(static_cast<size_t>(m->njnt), 0.0);
+  out.window_error.assign(static_cast<size_t>(std::max(windows, 0)), std::vector<double>(static_cast<size_t>(m->njnt), 0.0));
   const Eigen::Index N = s.rows();
   // Rows spanned by one horizon.
   Eigen::Index span = 0;
   while (span + 1 < N && s.t[span + 1] - s.t[0] < horizon) ++span;
   ++span;
   if (span >= N) throw std::runtime_error("split '" + s.name + "' is shorter than one rollout horizon");
+  // Start rows whose window stays within one record, spread evenly over them.
+  std::vector<Eigen::Index> starts, bounds{0};
+  bounds.insert(bounds.end(), runs.begin(), runs.end());
+  bounds.push_back(N);
+  for (size_t r = 0; r + 1 < bounds.size(); ++r)
+    for (Eigen::Index i = bounds[r]; i + span < bounds[r + 1]; ++i) starts.push_back(i);
+  if (starts.empty()) throw std::runtime_error("split '" + s.name + "': no record is longer than one rollout horizon");
   const int steps = std::max(1, static_cast<int>(std::lround(horizon / m->opt.timestep)));
   for (int w = 0; w < windows; ++w) {
-    const Eigen::Index start = static_cast<Eigen::Index>(static_cast<double>(w) * static_cast<double>(N - 1 - span) / std::max(1, windows - 1));
+    const Eigen::Index start = starts[static_cast<size_t>(static_cast<double>(w) * static_cast<double>(starts.size() - 1) / std::max(1, windows - 1))];
     mj_resetData(m, d);
     effects.reset();
     for (int j = 0; j < m->njnt; ++j) {
@@ -67,8 +75,10 @@ RolloutResult rollout(const std::string& mjcf_path, const Split& s, int windows,
     for (int j = 0; j < m->njnt; ++j) {
       const int c = qc[static_cast<size_t>(j)];
       const double qm = (1 - f) * s.X(r, c) + f * s.X(std::min(r + 1, N - 1), c);
-      const double e = std::fabs(d->qpos[m->jnt_qposadr[j]] - qm);
-      out.position_error[static_cast<size_t>(j)] += (std::isfinite(e) ? e : std::numeric_limits<double>::infinity()) / windows;
+      double e = std::fabs(d->qpos[m->jnt_qposadr[j]] - qm);
+      if (!std::isfinite(e)) e = std::numeric_limits<double>::infinity();
+      out.window_error[static_cast<size_t>(w)][static_cast<size_t>(j)] = e;
+      out.position_error[static_cast<size_t>(j)] += e / windows;
     }
   }
   out.windows = windows;

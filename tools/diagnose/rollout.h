@@ -12,6 +12,7 @@ namespace spml::diagnose_detail {
 struct RolloutResult {
   std::vector<std::string> joints;        // the model's joints
   std::vector<double> position_error;     // per joint: mean |q_sim - q_measured| at the horizon
+  std::vector<std::vector<double>> window_error;   // per window, per joint: |q_sim - q_measured|
   int windows = 0;
   double horizon = 0;                     // seconds
 };
@@ -20,6 +21,7 @@ struct RolloutResult {
 // q:/qd:/tau:<joint> columns), each `horizon` seconds long, with contacts off (inverse
 // dynamics has none either) and the model's force plugins attached. Joints without a tau:
 // column get no applied torque.
-RolloutResult rollout(const std::string& mjcf_path, const Split& s, int windows, double horizon);
+// `runs`: first rows of the records after the first (several --data): no window spans a junction.
+RolloutResult rollout(const std::string& mjcf_path, const Split& s, int windows, double horizon, const std::vector<Eigen::Index>& runs = {});
 
 }  // namespace spml::diagnose_detail

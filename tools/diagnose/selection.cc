@@ -38,7 +38,11 @@ void Diagnosis::score_candidates(const Fit& current, const std::vector<int>& cho
     Candidate& c = cands_[k];
     if (c.skipped) continue;
     try {
-      if (!c.searched || (!c.shape.empty() && research.count(c.joint)))
+      if (c.stateful && !c.searched) {   // #22: fitted once by simulation, against the residual before other causes on its joint
+        fit_stateful(c, current);
+        if (c.skipped) continue;
+      }
+      else if (!c.stateful && (!c.searched || (!c.shape.empty() && research.count(c.joint))))
         search_shape(c, current);
       else
         c.gain = gain_of(c.fit_cols, current.Q, current.residual);
@@ -63,6 +67,9 @@ void Diagnosis::score_candidates(const Fit& current, const std::vector<int>& cho
 // Forward: at each step the first of the best six candidates whose fitted parameters the
 // plugin accepts and which gains on the test split joins.
 void Diagnosis::select() {
+  auto t_delay = Clock::now();
+  estimate_delay();   // #22: a delay is corrected before any other cause is estimated (delay.cc)
+  result_.timings.search += since(t_delay);
   std::vector<int> chosen;
   std::set<int> research;   // joints whose candidates need a new shape search
   for (size_t j = 0; j < still_.size(); ++j) research.insert(static_cast<int>(j));

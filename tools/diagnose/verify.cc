@@ -15,9 +15,57 @@ namespace spml::diagnose_detail {
 Eigen::VectorXd Diagnosis::written_prediction(const MjcfRegressor& ext, const MjcfRegressor::Base& ebase, const SplitData& s) const {
   const JointColumns cols(ext, s.split);
   Eigen::VectorXd pred = stacked_base_regressor(ext, ebase, s.split.X, cols, s.name) * ebase.model_values;
-  filter_stacked(s.sos, pred, s.N);
+  filter_stacked(s.sos, pred, s.N, s.runs);
   if (s.friction.size()) pred += s.friction;   // MuJoCo's frictionloss, as in `given` (load.cc)
+  pred += written_stateful(s, ext.model());   // #22: stateful plugins are no regressor columns: simulated as declared
   return pred;
+}
+
+// Writes one version of the model to ext_path and returns its predictions on the fit and test
+// splits (its own inverse dynamics, reloaded with MuJoCo).
+std::pair<Eigen::VectorXd, Eigen::VectorXd> Diagnosis::write_scored(const std::string& ext_path, MjcfEdits& e, std::vector<std::string>& n) {
+  try {
+    result_.extended_mjcf = edit_mjcf(opt_.model, e, n);
+  } catch (const std::runtime_error& err) {
+    if (e.inertials.empty()) throw;
+    // A compiler setting that would override written inertials (inertiafromgeom, settotalmass).
+    e.inertials.clear();
+    n.push_back(std::string(err.what()) + ": the re-identified inertials are not written");
+    parameters_partial_ = true;
+    result_.extended_mjcf = edit_mjcf(opt_.model, e, n);
+  }
+  write_text_atomic(ext_path, result_.extended_mjcf);
+  MjcfRegressor ext(ext_path);
+  const auto ebase = ext.base_parameters();
+  return std::make_pair(written_prediction(ext, ebase, fit_), written_prediction(ext, ebase, test_));
+}
+
+// Re-identified parameters written only in part (inertials refused) are one solution cut in
+// two; they may predict worse than the MJCF's own. The version that fits the fit split better
+// is kept.
+void Diagnosis::choose_partial(const std::string& ext_path, MjcfEdits& edits, std::vector<std::string>& notes,
+                               std::pair<Eigen::VectorXd, Eigen::VectorXd>& written) {
+  nlohmann::json& R = result_.report;
+  MjcfEdits effects_only = edits;
+  effects_only.joint_attributes.clear();
+  effects_only.inertials.clear();
+  std::vector<std::string> notes_none = notes;
+  const std::string text_all = result_.extended_mjcf;
+  auto none = write_scored(ext_path, effects_only, notes_none);
+  const double rss_all = (fit_.b - written.first).squaredNorm(), rss_none = (fit_.b - none.first).squaredNorm();
+  // Equal to rounding, the MJCF's own parameters (the smaller change) are kept.
+  if (rss_none <= rss_all + rss_floor(fit_.b)) {
+    written = std::move(none);
+    edits = effects_only;
+    notes = notes_none;
+    R["parameters_written"] = "none";
+    notes.push_back("the re-identified parameters could be written only in part (inertials refused), and that version fits the fit "
+                    "split no better (relative error " + fmt(std::sqrt(rss_all) / fit_.b.norm(), 8) + ") than the MJCF's own parameters "
+                    "with the effects (" + fmt(std::sqrt(rss_none) / fit_.b.norm(), 8) + "): extended.xml keeps the MJCF's parameters");
+  } else {
+    result_.extended_mjcf = text_all;
+    write_text_atomic(ext_path, result_.extended_mjcf);
+  }
 }
 
 // Writes extended.xml and scores it: `final` in report.json is the written model's, reloaded
@@ -29,58 +77,39 @@ std::pair<Eigen::VectorXd, Eigen::VectorXd> Diagnosis::verify(const std::string&
   auto t0 = Clock::now();
   nlohmann::json& R = result_.report;
   edits.comment = "extended by spml diagnose from " + opt_.model + " and " + opt_.data + " (fit split '" + opt_.fit_split + "')";
-  const fs::path ext_path = out_dir.empty() ? fs::temp_directory_path() / ("spml-extended-" + std::to_string(::getpid()) + ".xml")
-                                            : fs::path(out_dir) / "extended.xml";
+  const std::string ext_path = (out_dir.empty() ? fs::temp_directory_path() / ("spml-extended-" + std::to_string(::getpid()) + ".xml")
+                                                : fs::path(out_dir) / "extended.xml").string();
   if (!out_dir.empty()) fs::create_directories(out_dir);
-  // Writes one version of the model and returns its predictions on the fit and test splits.
-  auto write_and_score = [&](const MjcfEdits& e, std::vector<std::string>& n) {
-    result_.extended_mjcf = write_extended_mjcf(opt_.model, e, n);
-    write_text_atomic(ext_path.string(), result_.extended_mjcf);
-    MjcfRegressor ext(ext_path.string());
-    const auto ebase = ext.base_parameters();
-    return std::make_pair(written_prediction(ext, ebase, fit_), written_prediction(ext, ebase, test_));
-  };
   std::vector<std::string> notes_all = notes;
-  std::pair<Eigen::VectorXd, Eigen::VectorXd> written = write_and_score(edits, notes_all);
+  std::pair<Eigen::VectorXd, Eigen::VectorXd> written = write_scored(ext_path, edits, notes_all);
   R["parameters_written"] = !parameters_named_ ? "none" : parameters_partial_ ? "partial" : "all";
-  if (parameters_partial_) {
-    // The re-identified parameters are one solution; written in part (inertials refused) they
-    // may predict worse than the MJCF's own. The version that fits the fit split better is kept.
-    MjcfEdits effects_only = edits;
-    effects_only.joint_attributes.clear();
-    effects_only.inertials.clear();
-    std::vector<std::string> notes_none = notes;
-    const std::string text_all = result_.extended_mjcf;
-    auto none = write_and_score(effects_only, notes_none);
-    const double rss_all = (fit_.b - written.first).squaredNorm(), rss_none = (fit_.b - none.first).squaredNorm();
-    if (rss_none < rss_all) {
-      written = std::move(none);
-      notes_all = notes_none;
-      R["parameters_written"] = "none";
-      notes_all.push_back("the re-identified parameters could be written only in part (inertials refused), and that version fits the fit "
-                          "split worse (relative error " + fmt(std::sqrt(rss_all) / fit_.b.norm()) + ") than the MJCF's own parameters with "
-                          "the effects (" + fmt(std::sqrt(rss_none) / fit_.b.norm()) + "): extended.xml keeps the MJCF's parameters");
-    } else {
-      result_.extended_mjcf = text_all;
-      write_text_atomic(ext_path.string(), result_.extended_mjcf);
-    }
-  }
+  if (parameters_partial_) choose_partial(ext_path, edits, notes_all, written);
   notes = notes_all;
-  R["extended_mjcf"] = out_dir.empty() ? "" : "extended.xml";
-  {
-    R["extended_check"] = {{"max_abs_deviation", (written.first - final_pred_fit).cwiseAbs().maxCoeff()},
-                           {"rms_torque", std::sqrt(fit_.b.squaredNorm() / static_cast<double>(fit_.b.size()))}};
-    R["final"] = metrics(fit_.b - written.first, test_.b - written.second);
-    nlohmann::json plugins = nlohmann::json::array();
-    for (const auto& [name, data] : edits.texts) plugins.push_back(name);
-    R["needs_spml_plugins"] = plugins;
-    if (!plugins.empty())
-      notes.push_back("extended.xml declares " + std::to_string(plugins.size()) + " spml force plugin(s) (needs_spml_plugins): plain MuJoCo "
-                      "ignores these <custom><text> elements; simulate with spml (ForceEffects) to see them");
+  bool changed = false;
+  if (confirm_in_simulation(ext_path, edits)) {
+    note_rejections(edits, notes);
+    changed = true;
   }
+  // The effects are fitted again with the parameters written (and checked by their plugins).
+  changed |= refit_written_effects(ext_path, edits, notes);
+  if (changed) {
+    std::vector<std::string> again;   // the same edit notes as before, not repeated
+    written = write_scored(ext_path, edits, again);
+  }
+  guard_held_out(ext_path, edits, notes, written);
+  R["extended_mjcf"] = out_dir.empty() ? "" : "extended.xml";
+  R["extended_check"] = {{"max_abs_deviation", (written.first - final_pred_fit).cwiseAbs().maxCoeff()},
+                         {"rms_torque", std::sqrt(fit_.b.squaredNorm() / static_cast<double>(fit_.b.size()))}};
+  R["final"] = metrics(fit_.b - written.first, test_.b - written.second);
+  nlohmann::json plugins = nlohmann::json::array();
+  for (const auto& [name, data] : edits.texts) plugins.push_back(name);
+  R["needs_spml_plugins"] = plugins;
+  if (!plugins.empty())
+    notes.push_back("extended.xml declares " + std::to_string(plugins.size()) + " spml force plugin(s) (needs_spml_plugins): plain MuJoCo "
+                    "ignores these <custom><text> elements; simulate with spml (ForceEffects) to see them");
   result_.timings.outputs += since(t0);
   t0 = Clock::now();
-  run_rollouts(ext_path.string(), notes);
+  run_rollouts(ext_path, notes);
   if (out_dir.empty()) fs::remove(ext_path);
   result_.timings.rollouts += since(t0);
   return written;
@@ -92,16 +121,17 @@ void Diagnosis::run_rollouts(const std::string& ext_path, std::vector<std::strin
   nlohmann::json& R = result_.report;
   if (opt_.rollouts <= 0) return;
   try {
-    const RolloutResult before = rollout(opt_.model, test_.split, opt_.rollouts, opt_.rollout_seconds);
-    const RolloutResult after = rollout(ext_path, test_.split, opt_.rollouts, opt_.rollout_seconds);
+    const RolloutResult before = rollout(opt_.model, test_.split, opt_.rollouts, opt_.rollout_seconds, test_.runs);
+    const RolloutResult after = rollout(ext_path, test_.split, opt_.rollouts, opt_.rollout_seconds, test_.runs);
     nlohmann::json b = nlohmann::json::object(), a = nlohmann::json::object(), worse = nlohmann::json::array();
     for (size_t j = 0; j < before.joints.size(); ++j) {
       b[before.joints[j]] = before.position_error[j];
       a[after.joints[j]] = after.position_error[j];
       if (!(after.position_error[j] <= before.position_error[j])) worse.push_back(before.joints[j]);
     }
+    const nlohmann::json rejected = rejected_causes(R["causes"]);
     R["rollout"] = {{"split", test_name_}, {"horizon_s", opt_.rollout_seconds}, {"windows", before.windows},
-                    {"position_error_before", b}, {"position_error_after", a}, {"worse_on", worse}};
+                    {"position_error_before", b}, {"position_error_after", a}, {"worse_on", worse}, {"rejected", rejected}};
     if (!worse.empty())
       notes.push_back("rollouts of extended.xml end farther from the measured positions than the model as given on " + worse.dump() +
                       " (rollout.worse_on): the causes on those joints are not confirmed in simulation");

@@ -5,6 +5,8 @@
                  at most 800 time bins (a 50 s log at 1 kHz is 50 000 points: drawn one by one
                  the two models hide each other) with the bin's RMS as a line
   states.png     measured positions and velocities
+  unexplained.png (when report.json lists unexplained joints) each such joint's held-out
+                 residual and the GP fitted to it against its most relevant input (unexplained.csv)
   rollouts.png   (when report.json has rollouts) open-loop rollouts under the measured torques:
                  the position error at the end of the horizon, model as given and extended
 Reads DIR/series.csv and DIR/report.json (written by diagnose). Units come from each joint's
@@ -150,6 +152,34 @@ def main(folder):
     residual_figure(t, test, col, joints, units, out)
     states_figure(t, test, col, joints, units, out)
     rollout_figure(report, units, out)
+    unexplained_figure(folder, units, out)
+
+
+def unexplained_figure(folder, units, out):
+    """Issue #22: each joint diagnose reports as unexplained - its held-out residual and the GP's
+    prediction against the most relevant input (DIR/unexplained.csv) - into plots/unexplained.png."""
+    path = os.path.join(folder, "unexplained.csv")
+    if not os.path.exists(path):
+        return
+    with open(path) as f:
+        rows = list(csv.reader(f))[1:]
+    joints = list(dict.fromkeys(r[0] for r in rows))
+    if not joints:
+        return
+    fig, axes = plt.subplots(len(joints), 1, figsize=(7, 2.4 * len(joints) + 0.6), squeeze=False)
+    for ax, j in zip(axes[:, 0], joints):
+        mine = sorted((float(r[2]), float(r[3]), float(r[4])) for r in rows if r[0] == j)
+        name = next(r[1] for r in rows if r[0] == j)
+        ax.plot([m[0] for m in mine], [m[1] for m in mine], ".", ms=2, color="tab:gray", label="residual (test)")
+        ax.plot([m[0] for m in mine], [m[2] for m in mine], ".", ms=2, color="tab:purple", label="GP on the residual")
+        ax.set_xlabel(name)
+        ax.set_ylabel(f"{j} [{units[j]['torque']}]" if j in units else j, fontsize=8)
+        ax.grid(alpha=0.3)
+    axes[0, 0].set_title("unexplained: final residual against its most relevant input")
+    axes[0, 0].legend(loc="upper right", fontsize=8, markerscale=4)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "unexplained.png"), dpi=90)
+    plt.close(fig)
 
 
 if __name__ == "__main__":

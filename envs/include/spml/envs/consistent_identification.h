@@ -70,6 +70,7 @@ struct ConsistentIdentification {
   std::string stop;                 // CONVERGED, or why not (MAXEVAL_REACHED, MAXTIME_REACHED)
   double prior_weight = 0;
   std::vector<Identification::SplitError> errors;   // as in identify(): fit split first
+  Eigen::VectorXd extra, extra_std_error;           // coefficients of the extra columns, if any
 };
 
 // The stacked standard regressor (all of reg.param_names(), rows output-major as in
@@ -77,10 +78,13 @@ struct ConsistentIdentification {
 Eigen::MatrixXd stacked_standard_regressor(const MjcfRegressor& reg, const RowMatrix& X, const JointColumns& cols,
                                            const std::string& where);
 
-// The fit on a stacked regressor W (columns: reg.param_names()) and torques tau. Throws
-// std::runtime_error when the problem is empty or not finite.
+// The fit on a stacked regressor W (columns: reg.param_names()) and torques tau. `extra`
+// (same rows, optional): more columns fitted jointly with free coefficients (e.g. force
+// effects a diagnosis found), each with a prior toward 0 worth lambda equations as for the
+// joint terms; their coefficients come back in `extra`. Throws std::runtime_error when the
+// problem is empty or not finite.
 ConsistentIdentification fit_consistent(const MjcfRegressor& reg, const Eigen::MatrixXd& W, const Eigen::VectorXd& tau,
-                                        const ConsistentOptions& options = {});
+                                        const ConsistentOptions& options = {}, const Eigen::MatrixXd& extra = Eigen::MatrixXd());
 
 // The fit on one split of a dataset (columns as for identify()), every split scored.
 ConsistentIdentification identify_consistent(const MjcfRegressor& reg, const Dataset& ds, const std::string& split,

@@ -1,6 +1,6 @@
 // Editing an MJCF file in place as XML (tinyxml2), so that its defaults, classes, names and
 // comments survive: new joint attributes, new body inertials, force-plugin declarations.
-// Used by `spml identify --write-model`; meant for `spml diagnose`'s extended.xml as well.
+// The one MJCF writer of spml: `spml identify --write-model` and `spml diagnose`'s extended.xml.
 #pragma once
 
 #include <array>
@@ -28,8 +28,10 @@ struct MjcfEdits {
 };
 
 // The text of the edited model. Relative asset and include paths are made absolute so the file
-// loads from any folder. What cannot be applied (a joint or body defined in an included file, an
-// unnamed body) is appended to `notes`. Throws std::runtime_error naming the file when it is not
+// loads from any folder. Joints and bodies are looked up under <worldbody> only; a <custom><text>
+// name already in the file gets a suffix (_2, _3, ...); the comment goes after an <?xml?>
+// declaration, with any "--" broken up. What cannot be applied (a joint or body defined in an
+// included file, an unnamed body) is appended to `notes`. Throws std::runtime_error naming the file when it is not
 // an MJCF or when its compiler settings would override written inertials (inertiafromgeom="true",
 // settotalmass).
 std::string edit_mjcf(const std::string& model_path, const MjcfEdits& edits, std::vector<std::string>& notes);

@@ -1,0 +1,260 @@
+// Stage 6b, confirmation in simulation: a cause whose written form makes the model's open-loop
+// rollouts worse, beyond their noise, is not a gain. Rollouts of the model as given and of the
+// written model start from the same measured states (rollout.h); per joint the paired
+// difference of their end errors over the windows is "worse beyond noise" when its mean exceeds
+// twice its standard error. While some joint is, the kept causes on those joints are taken out
+// of the written model one at a time, the last chosen first; a cause goes (rejected, with both
+// rollout errors in report.json) when the model without it does better on those joints and,
+// over all joints, in rollout error relative to the model as given.
+#include <algorithm>
+#include <cmath>
+
+#include "diagnosis.h"
+#include "rollout.h"
+#include "spml/matrix_file.h"
+
+namespace spml::diagnose_detail {
+namespace {
+
+std::vector<bool> worse_beyond_noise(const RolloutResult& before, const RolloutResult& after) {
+  std::vector<bool> out(before.joints.size(), false);
+  const auto W = before.window_error.size();
+  for (size_t j = 0; j < out.size(); ++j) {
+    double sum = 0, sum2 = 0;
+    for (size_t w = 0; w < W; ++w) {
+      const double d = after.window_error[w][j] - before.window_error[w][j];
+      sum += d, sum2 += d * d;
+    }
+    const double mean = sum / static_cast<double>(W), var = std::max(sum2 / static_cast<double>(W) - mean * mean, 0.0);
+    out[j] = !std::isfinite(mean) || mean > 2 * std::sqrt(var / static_cast<double>(W - 1));
+  }
+  return out;
+}
+
+// Sum over joints of the rollout error relative to the model as given's.
+double relative_total(const RolloutResult& before, const RolloutResult& after, const std::vector<bool>* only = nullptr) {
+  double s = 0;
+  for (size_t j = 0; j < before.joints.size(); ++j)
+    if (!only || (*only)[j]) s += after.position_error[j] / std::max(before.position_error[j], 1e-300);
+  return std::isfinite(s) ? s : HUGE_VAL;
+}
+
+nlohmann::json per_joint_errors(const RolloutResult& r) {
+  nlohmann::json j = nlohmann::json::object();
+  for (size_t k = 0; k < r.joints.size(); ++k) j[r.joints[k]] = r.position_error[k];
+  return j;
+}
+
+// The edits without one cause's part: an effect's declaration, or every parameter edit.
+MjcfEdits without_cause(const MjcfEdits& edits, const nlohmann::json& cause) {
+  MjcfEdits out = edits;
+  if (cause["effect"] == "parameters") {
+    out.joint_attributes.clear();
+    out.inertials.clear();
+  } else {
+    const std::string decl = cause.value("declaration", "");
+    out.texts.erase(std::remove_if(out.texts.begin(), out.texts.end(), [&](const auto& t) { return t.second == decl; }), out.texts.end());
+  }
+  return out;
+}
+
+bool on_joints(const nlohmann::json& cause, const std::vector<std::string>& joints, const std::vector<bool>& flag) {
+  for (const auto& j : cause["joints"])
+    for (size_t k = 0; k < joints.size(); ++k)
+      if (flag[k] && joints[k] == j.get<std::string>()) return true;
+  return false;
+}
+
+}  // namespace
+
+nlohmann::json rejected_causes(const nlohmann::json& causes) {
+  nlohmann::json out = nlohmann::json::array();
+  for (const auto& c : causes) {
+    if (c.contains("rejected"))
+      out.push_back(c["effect"].get<std::string>() + (c["effect"] == "parameters" ? "" : "@" + c["joints"][0].get<std::string>()));
+    for (const auto& [joint, r] : c.value("rejected_joint_terms", nlohmann::json::object()).items()) out.push_back("parameters@" + joint);
+  }
+  return out;
+}
+
+// After rejections: parameters_written follows what is left, and a note says what went.
+void Diagnosis::note_rejections(const MjcfEdits& edits, std::vector<std::string>& notes) {
+  nlohmann::json& R = result_.report;
+  const nlohmann::json rejected = rejected_causes(R["causes"]);
+  if (edits.joint_attributes.empty() && edits.inertials.empty())
+    R["parameters_written"] = "none";
+  else if (rejected.dump().find("parameters@") != std::string::npos)
+    R["parameters_written"] = "partial";
+  notes.push_back("rejected in simulation (causes[].rejected): " + rejected.dump() + " made the rollouts of the written model worse "
+                  "beyond their noise on their joints; extended.xml leaves them out, and `final` and extended_check are of the model without them");
+}
+
+// Returns true when a cause (or a joint's part of `parameters`) was rejected; edits and the file
+// at ext_path are then without it.
+bool Diagnosis::confirm_in_simulation(const std::string& ext_path, MjcfEdits& edits) {
+  if (opt_.rollouts < 3) return false;
+  nlohmann::json& causes = result_.report["causes"];
+  auto write = [&](const MjcfEdits& e) {
+    std::vector<std::string> ignored;
+    write_text_atomic(ext_path, edit_mjcf(opt_.model, e, ignored));
+  };
+  bool rejected_any = false;
+  try {
+    const RolloutResult before = rollout(opt_.model, test_.split, opt_.rollouts, opt_.rollout_seconds, test_.runs);
+    RolloutResult with = rollout(ext_path, test_.split, opt_.rollouts, opt_.rollout_seconds, test_.runs);
+    std::vector<bool> worse;
+    // Writes `trial`; keeps it when its rollouts do better on the worse joints and over all.
+    auto better_without = [&](const MjcfEdits& trial, nlohmann::json& record) {
+      write(trial);
+      RolloutResult without = rollout(ext_path, test_.split, opt_.rollouts, opt_.rollout_seconds, test_.runs);
+      if (!(relative_total(before, without, &worse) < relative_total(before, with, &worse) &&
+            relative_total(before, without) < relative_total(before, with)))
+        return false;
+      record = {{"reason", "its written form makes the rollouts worse beyond their noise on its joints; extended.xml leaves it out"},
+                {"rollout_error_with", per_joint_errors(with)}, {"rollout_error_without", per_joint_errors(without)}};
+      edits = trial;
+      with = std::move(without);
+      return rejected_any = true;
+    };
+    for (bool dropped = true; dropped;) {
+      dropped = false;
+      worse = worse_beyond_noise(before, with);
+      if (std::find(worse.begin(), worse.end(), true) == worse.end()) break;
+      nlohmann::json record;
+      for (auto i = static_cast<std::ptrdiff_t>(causes.size()) - 1; i >= 0 && !dropped; --i) {
+        nlohmann::json& c = causes[static_cast<size_t>(i)];
+        if (c.contains("superseded_by") || c.contains("rejected") || !on_joints(c, before.joints, worse)) continue;
+        if (c["effect"] != "parameters") {
+          if (c.contains("declaration") && (dropped = better_without(without_cause(edits, c), record))) c["rejected"] = record;
+          continue;
+        }
+        // A joint's own terms first (its armature, damping, ... back to the MJCF's), then all.
+        for (size_t j = 0; j < worse.size() && !dropped; ++j) {
+          if (!worse[j] || !edits.joint_attributes.count(before.joints[j])) continue;
+          MjcfEdits trial = edits;
+          trial.joint_attributes.erase(before.joints[j]);
+          if ((dropped = better_without(trial, record))) c["rejected_joint_terms"][before.joints[j]] = record;
+        }
+        if (!dropped && (!edits.inertials.empty() || !edits.joint_attributes.empty()) && (dropped = better_without(without_cause(edits, c), record)))
+          c["rejected"] = record;
+      }
+    }
+  } catch (const std::exception&) {
+    // Rollouts impossible (no time stamps, a split shorter than one horizon): run_rollouts says so.
+  }
+  write(edits);
+  return rejected_any;
+}
+
+}  // namespace spml::diagnose_detail
+
+namespace spml::diagnose_detail {
+namespace {
+
+bool is_diagnosed(const std::pair<std::string, std::string>& text) { return text.first.rfind("spml.plugin.diagnosed_", 0) == 0; }
+
+}  // namespace
+
+// The written effects are fitted again, by least squares on the fit split, against what the
+// written model without them predicts: amplitudes fitted jointly with parameters that are then
+// not written (refused inertials, rejected terms) belong to another model. A cause whose
+// amplitudes the plugin then refuses (a negative friction level, fs < fc) is rejected and the
+// rest fitted again without it. Returns true when a declaration changed.
+bool Diagnosis::refit_written_effects(const std::string& ext_path, MjcfEdits& edits, std::vector<std::string>& notes) {
+  nlohmann::json& causes = result_.report["causes"];
+  const size_t first = parameters_named_ ? 1 : 0;
+  bool changed = false;
+  for (bool again = true; again;) {
+    again = false;
+    std::vector<size_t> live;
+    for (size_t i = 0; i < causes_.size(); ++i) {
+      const nlohmann::json& cj = causes[first + i];
+      // A stateful cause (#22) keeps the keys its simulation fit found: it has no linear amplitudes to refit.
+      if (causes_[i].superseded_by.empty() && cj.contains("declaration") && !cj.contains("rejected") &&
+          !cands_[static_cast<size_t>(causes_[i].candidate)].stateful)
+        live.push_back(i);
+    }
+    if (live.empty()) break;
+    MjcfEdits bare = edits;
+    // Without the effects refitted here; a stateful one (not refitted) stays in, so `rest` is net of its force.
+    std::vector<std::string> refitted;
+    for (size_t i : live) refitted.push_back(causes[first + i]["declaration"].get<std::string>());
+    bare.texts.erase(std::remove_if(bare.texts.begin(), bare.texts.end(),
+                                    [&](const auto& t) { return is_diagnosed(t) && std::find(refitted.begin(), refitted.end(), t.second) != refitted.end(); }),
+                     bare.texts.end());
+    std::vector<std::string> ignored;
+    write_text_atomic(ext_path, edit_mjcf(opt_.model, bare, ignored));
+    const MjcfRegressor ext(ext_path);
+    const Eigen::VectorXd rest = fit_.b - written_prediction(ext, ext.base_parameters(), fit_);
+    std::vector<const BlockColumns*> blocks;
+    for (size_t i : live) blocks.push_back(&cands_[static_cast<size_t>(causes_[i].candidate)].fit_cols);
+    const Fit f = fit_blocks(blocks, rest, false);
+    Eigen::Index off = 0;
+    for (size_t i : live) {
+      const Candidate& c = cands_[static_cast<size_t>(causes_[i].candidate)];
+      Eigen::VectorXd theta(c.fit_cols.cols);
+      for (Eigen::Index k = 0; k < theta.size(); ++k) theta[k] = f.determined[static_cast<size_t>(off + k)] ? f.coef[off + k] : 0.0;
+      off += c.fit_cols.cols;
+      nlohmann::json& cj = causes[first + i];
+      auto text = std::find_if(edits.texts.begin(), edits.texts.end(), [&](const auto& t) { return t.second == cj["declaration"].get<std::string>(); });
+      if (text == edits.texts.end()) continue;
+      const std::string why = refused(causes_[i].candidate, theta);
+      if (!why.empty()) {
+        edits.texts.erase(text);
+        cj["rejected"] = {{"reason", "fitted with the parameters extended.xml states, " + why + "; extended.xml leaves it out"},
+                          {"summary", "refused once fitted with the written parameters"}};
+        again = changed = true;
+        break;
+      }
+      PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
+      inst.set_params(theta);
+      const auto pnames = inst.param_names();
+      nlohmann::json pw = nlohmann::json::object();
+      for (Eigen::Index k = 0; k < theta.size(); ++k) pw[pnames[static_cast<size_t>(k)]] = theta[k];
+      const std::string decl = "type=" + std::string(c.plugin->name) + " joints=" + c.joint_name + " " + inst.config_text();
+      changed |= decl != text->second;
+      text->second = decl;
+      cj["declaration"] = decl;
+      cj["params_written"] = pw;
+    }
+  }
+  if (changed && parameters_named_ && result_.report["parameters_written"] != "all")
+    notes.push_back("the effects were fitted jointly with re-identified parameters that extended.xml does not keep (all): their amplitudes "
+                    "(causes[].params_written) are fitted again with the parameters it states");
+  return changed;
+}
+
+// The written model must not predict the held-out split worse than the model as given: then
+// the re-identified parameters go first (the effects fitted again with the MJCF's own), and if
+// that is still worse, every cause: extended.xml is the model as given, and the notes say why.
+void Diagnosis::guard_held_out(const std::string& ext_path, MjcfEdits& edits, std::vector<std::string>& notes,
+                               std::pair<Eigen::VectorXd, Eigen::VectorXd>& written) {
+  nlohmann::json& R = result_.report;
+  const double given = test_.y0.squaredNorm();
+  // Worse beyond rounding: the model as given written back predicts `given` to the last digits.
+  auto worse = [&] { return (test_.b - written.second).squaredNorm() > given + rss_floor(test_.b); };
+  if (!worse()) return;
+  const std::string why = "the written model predicts the held-out split '" + test_name_ + "' worse (relative error " +
+                          fmt((test_.b - written.second).norm() / test_.b.norm(), 8) + ") than the model as given (" +
+                          fmt(std::sqrt(given) / test_.b.norm(), 8) + ")";
+  const nlohmann::json record = {{"reason", why + "; extended.xml leaves it out"}, {"summary", "held-out error worse than the model as given"}};
+  std::vector<std::string> ignored;
+  if (parameters_named_ && (!edits.joint_attributes.empty() || !edits.inertials.empty())) {
+    edits.joint_attributes.clear();
+    edits.inertials.clear();
+    R["causes"][0]["rejected"] = record;
+    R["parameters_written"] = "none";
+    notes.push_back(why + ": the re-identified parameters are left out and the effects fitted again with the MJCF's own");
+    refit_written_effects(ext_path, edits, notes);
+    written = write_scored(ext_path, edits, ignored);
+    if (!worse()) return;
+  }
+  for (auto& c : R["causes"])
+    if (!c.contains("superseded_by") && !c.contains("rejected")) c["rejected"] = record;
+  edits = MjcfEdits{{}, {}, {}, edits.comment};
+  R["parameters_written"] = "none";
+  written = write_scored(ext_path, edits, ignored);
+  notes.push_back(why + " with its causes: none is written (causes[].rejected), extended.xml is the model as given");
+}
+
+}  // namespace spml::diagnose_detail

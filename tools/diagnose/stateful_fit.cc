@@ -1,0 +1,279 @@
+// Issue #22 item 1, stateful effects fitted by simulation. A force plugin with internal state
+// (`advance`/`reset`, no regressor: LuGre `stick_slip`) is not a regressor of the measured
+// state, but its state follows from the measured motion: integrated along the log (the
+// plugin's own `advance` between the rows' time stamps, from `reset`), it gives a force
+// column for any parameter set. Its parameters are fitted by output error - the residual of
+// the current fit, with the base parameters and the causes already chosen projected out
+// (variable projection), minus the simulated force - over the logarithms of every numeric key
+// the plugin requires (shape keys within their declared ranges, the others within a factor
+// 1000 of a common level found by a scan), by NLopt's subplex. The fitted force then enters
+// the selection as a candidate of one column (its amplitude free, near 1 at the fit) whose
+// evidence counts every fitted key, so it is compared with the static candidates on the same
+// held-out test. Standard errors: Gauss-Newton in the logarithms, autocorrelation-inflated;
+// a key whose relative standard error exceeds 50 % is reported not identifiable (a LuGre
+// bristle stiffness sigma0 when the data hold no resolved pre-sliding).
+#include <nlopt.hpp>
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+
+#include "diagnosis.h"
+#include "spml/parse.h"
+#include "statistics.h"
+
+namespace spml::diagnose_detail {
+namespace {
+
+constexpr double kNotIdentifiable = 0.5;   // relative standard error above which a key is reported not identifiable
+
+}  // namespace
+
+bool is_stateful(const spml_force_plugin& p) { return !p.regressor && p.advance && p.reset; }
+
+// One candidate per moving joint; every required numeric key becomes a searched parameter
+// (the plugin's shape keys with their own ranges, the others as levels, ranged by the fit).
+void Diagnosis::add_stateful_candidates(const spml_force_plugin& p) {
+  std::vector<const spml_shape_param*> shape;
+  for (const spml_shape_param* sp = p.shape_params; sp && sp->key; ++sp) shape.push_back(sp);
+  for (const spml_config_key* k = p.config_keys; k && k->name; ++k) {
+    bool is_shape = false;
+    for (auto* sp : shape) is_shape |= std::string(sp->key) == k->name;
+    if (is_shape || k->default_value) continue;
+    if (k->type == SPML_VALUE_TEXT) {
+      not_tried_.push_back({{"effect", p.name}, {"reason", "stateful, with a required text key '" + std::string(k->name) + "': nothing to search"}});
+      return;
+    }
+    // A level: its range is set by the fit (a factor 1000 either side of the scanned level).
+    synthesized_.push_back({k->name, SPML_SHAPE_ABSOLUTE, 1, 2, 1, 0});
+    shape.push_back(&synthesized_.back());
+  }
+  const size_t first = cands_.size();
+  add_candidates(p, shape, {});
+  for (size_t i = first; i < cands_.size(); ++i) cands_[i].stateful = true;
+}
+
+// The plugin's force integrated along a split: reset, then per row its force at the measured
+// state and an advance to the next row's time stamp. Inverse-dynamics sign, parallel filter.
+BlockColumns Diagnosis::simulated_columns(const PluginInstance& inst, const SplitData& s) const {
+  const mjModel* m = reg_->model();
+  // One mjData for every simulation (making one costs more than a whole pass along a split).
+  if (!sim_data_) sim_data_ = std::shared_ptr<mjData>(mj_makeData(m), [](mjData* p) { mj_deleteData(p); });
+  mjData* const dd = sim_data_.get();
+  struct NoDelete {
+    void operator()(mjData*) const {}
+  };
+  std::unique_ptr<mjData, NoDelete> d(dd);
+  const int O = static_cast<int>(s.split.Y.cols());
+  Eigen::MatrixXd C = Eigen::MatrixXd::Zero(s.N * O, 1);
+  std::vector<mjtNum> qfrc(static_cast<size_t>(m->nv));
+  inst.plugin().reset(inst.state());
+  for (Eigen::Index i = 0; i < s.N; ++i) {
+    for (int j = 0; j < m->njnt; ++j) {
+      d->qpos[m->jnt_qposadr[j]] = s.split.X(i, s.cols->q[static_cast<size_t>(j)]);
+      d->qvel[m->jnt_dofadr[j]] = s.split.X(i, s.cols->qd[static_cast<size_t>(j)]);
+    }
+    std::fill(qfrc.begin(), qfrc.end(), 0.0);
+    inst.plugin().compute(inst.state(), m, d.get(), qfrc.data());
+    for (int o = 0; o < O; ++o) C(o * s.N + i, 0) = -qfrc[static_cast<size_t>(s.cols->output_dof[static_cast<size_t>(o)])];
+    if (i + 1 == s.N) break;
+    // To the next row in substeps of at most 5 ms, the velocity interpolated linearly: a
+    // velocity held over a whole row flips the bristles a row late at each reversal.
+    const double dt = s.split.t[i + 1] - s.split.t[i];
+    const int steps = std::max(1, static_cast<int>(std::ceil(dt / 5e-3)));
+    for (int k = 0; k < steps; ++k) {
+      const double f = (k + 0.5) / steps;
+      for (int j = 0; j < m->njnt; ++j) {
+        const auto col = s.cols->qd[static_cast<size_t>(j)];
+        d->qvel[m->jnt_dofadr[j]] = (1 - f) * s.split.X(i, col) + f * s.split.X(i + 1, col);
+      }
+      inst.plugin().advance(inst.state(), m, d.get(), dt / steps);
+    }
+  }
+  if (!C.allFinite())
+    throw PluginError("plugin '" + std::string(inst.plugin().name) + "' gave non-finite forces along split '" + s.name + "'");
+  filter_stacked(s.sos, C, s.N);
+  return BlockColumns::from_dense(C, s.N, O);
+}
+
+// The drop of the residual sum of squares the simulated force with parameters exp(x) gives
+// against the current fit (minus infinity where the plugin refuses them).
+double Diagnosis::stateful_drop(const Candidate& c, const Fit& current, const std::vector<double>& x, Eigen::VectorXd* force) const {
+  std::vector<double> v(x.size());
+  for (size_t k = 0; k < x.size(); ++k) v[k] = std::exp(x[k]);
+  try {
+    PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, v), "diagnose");
+    const BlockColumns cols = simulated_columns(inst, fit_);
+    const Eigen::VectorXd F = cols.dense().col(0);
+    const Eigen::VectorXd QF = current.Q.transpose() * F;
+    if (force) *force = F - current.Q * QF;   // the projected force
+    return 2 * current.residual.dot(F) - (F.squaredNorm() - QF.squaredNorm());
+  } catch (const std::exception&) {
+    return -std::numeric_limits<double>::infinity();
+  }
+}
+
+// The output-error fit of one stateful candidate against the current fit.
+void Diagnosis::fit_stateful(Candidate& c, const Fit& current) {
+  if (fit_.split.t.size() != fit_.N) throw PluginError("no time stamps: a stateful effect cannot be integrated along the fit split");
+  const size_t ns = c.shape.size();
+  std::vector<double> x(ns), lb(ns), ub(ns);
+  std::vector<bool> level(ns);
+  for (size_t k = 0; k < ns; ++k) {
+    level[k] = std::any_of(synthesized_.begin(), synthesized_.end(), [&](const spml_shape_param& sp) { return &sp == c.shape[k]; });
+    const auto [lo, hi] = c.shape_range[k];
+    lb[k] = std::log(std::max(lo, 1e-12));
+    ub[k] = std::log(std::max(hi, 2e-12));
+    x[k] = 0.5 * (lb[k] + ub[k]);
+  }
+  // The common level of the non-shape keys: a scan from 1 % to 3x the residual's RMS on the joint.
+  const int o = static_cast<int>(std::find(out_joint_index_.begin(), out_joint_index_.end(), c.joint) - out_joint_index_.begin());
+  const double rms = std::sqrt(current.residual.segment(o * fit_.N, fit_.N).squaredNorm() / static_cast<double>(fit_.N));
+  double best_level = rms, best = -std::numeric_limits<double>::infinity();
+  for (int i = 0; i <= 15; ++i) {
+    const double a = rms * std::pow(10.0, -2.0 + 2.5 * i / 15.0);
+    for (size_t k = 0; k < ns; ++k)
+      if (level[k]) x[k] = std::log(a);
+    if (const double g = stateful_drop(c, current, x); g > best) best = g, best_level = a;
+  }
+  for (size_t k = 0; k < ns; ++k)
+    if (level[k]) {
+      x[k] = std::log(best_level);
+      lb[k] = x[k] - std::log(1e3);
+      ub[k] = x[k] + std::log(1e3);
+      c.shape_range[k] = {best_level * 1e-3, best_level * 1e3};
+    }
+  // Each shape key scanned on 9 points of its (log) range, the others held: subplex alone
+  // settled in a poor basin of the Stribeck speed and break-away force.
+  for (size_t k = 0; k < ns; ++k) {
+    if (level[k]) continue;
+    std::vector<double> trial = x;
+    double keep = x[k], best_k = stateful_drop(c, current, x);
+    for (int i = 0; i <= 8; ++i) {
+      trial[k] = lb[k] + (ub[k] - lb[k]) * i / 8.0;
+      if (const double g = stateful_drop(c, current, trial); g > best_k) best_k = g, keep = trial[k];
+    }
+    x[k] = keep;
+  }
+  // No evidence after the scans (a joint without such an effect): not worth the polish.
+  const double n = static_cast<double>(fit_.y0.size()), scanned = stateful_drop(c, current, x);
+  const bool polish = std::isfinite(scanned) && scanned > 0 &&
+                      delta_bic(n, current.rss, current.rss - scanned, static_cast<double>(ns) + 1, rss_floor(fit_.b)) > opt_.bic_threshold;
+  struct Ctx {
+    const Diagnosis* self;
+    const Candidate* c;
+    const Fit* current;
+  } ctx{this, &c, &current};
+  nlopt::opt local(nlopt::LN_SBPLX, static_cast<unsigned>(ns));
+  local.set_lower_bounds(lb);
+  local.set_upper_bounds(ub);
+  local.set_max_objective([](const std::vector<double>& v, std::vector<double>&, void* data) {
+    const auto* k = static_cast<Ctx*>(data);
+    const double g = k->self->stateful_drop(*k->c, *k->current, v);
+    return std::isfinite(g) ? g : -1e300;
+  }, &ctx);
+  local.set_maxeval(80 * static_cast<int>(ns));
+  local.set_xtol_abs(1e-4);
+  // Two passes: subplex restarted from its own end point leaves a valley it had stalled in.
+  for (int pass = 0; pass < (polish ? 2 : 0); ++pass) {
+    double value = 0;
+    try {
+      local.optimize(x, value);
+    } catch (const std::exception&) {
+      // a roundoff-limited stop: x holds the best point found
+    }
+  }
+  stateful_errors(c, current, x);
+  c.shape_values.resize(ns);
+  for (size_t k = 0; k < ns; ++k) c.shape_values[k] = std::exp(x[k]);
+  // A level the data leave free (no influence once the base parameters are refitted: a
+  // viscous sigma2 beside the MJCF's damping) is set to its key's lower bound when that is 0:
+  // no force is declared that the data do not show.
+  for (size_t k = 0; k < ns; ++k)
+    if (level[k] && !std::isfinite(c.stateful_se[k]))
+      for (const spml_config_key* key = c.plugin->config_keys; key && key->name; ++key)
+        if (std::string(key->name) == c.shape[k]->key && key->min == 0) c.shape_values[k] = 0;
+  // The levels must be what the data show: on clean data the fit drives fc and fs to nothing
+  // and keeps only the bristle damping, a velocity lag that is not friction (a clean draw of
+  // DiagnoseRealistic named stick_slip that way). A stateful candidate whose every level is
+  // undetermined, or with one beyond 50 % relative error, is not that effect.
+  std::string loose;
+  int determined_levels = 0;
+  for (size_t k = 0; k < ns; ++k) {
+    if (!level[k] || c.shape_values[k] == 0) continue;
+    if (c.stateful_se[k] <= kNotIdentifiable * c.shape_values[k]) ++determined_levels;
+    else loose += std::string(loose.empty() ? "" : ", ") + c.shape[k]->key;
+  }
+  if (determined_levels == 0 || !loose.empty()) {
+    c.skipped = true;
+    c.searched = true;
+    not_tried_.push_back({{"effect", c.plugin->name}, {"joint", c.joint_name},
+                          {"reason", "fitted by simulation, but its levels (" + (loose.empty() ? std::string("all") : loose) +
+                                         ") are not determined by the data: not this effect"}});
+    return;
+  }
+  PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
+  c.fit_cols = simulated_columns(inst, fit_);
+  c.gain = gain_of(c.fit_cols, current.Q, current.residual);
+  c.searched = true;
+}
+
+// Gauss-Newton standard errors in the logarithms (central differences of the projected
+// force), inflated by the residual's autocorrelation; large ones are not identifiable.
+void Diagnosis::stateful_errors(Candidate& c, const Fit& current, const std::vector<double>& x) {
+  const size_t ns = x.size();
+  Eigen::VectorXd F0;
+  const double drop = stateful_drop(c, current, x, &F0);
+  if (!std::isfinite(drop)) return;
+  Eigen::MatrixXd J(F0.size(), static_cast<Eigen::Index>(ns));
+  for (size_t k = 0; k < ns; ++k) {
+    std::vector<double> a = x, b = x;
+    a[k] += 0.01, b[k] -= 0.01;
+    Eigen::VectorXd Fa, Fb;
+    if (!std::isfinite(stateful_drop(c, current, a, &Fa)) || !std::isfinite(stateful_drop(c, current, b, &Fb))) Fa = Fb = F0;
+    J.col(static_cast<Eigen::Index>(k)) = (Fa - Fb) / 0.02;
+  }
+  const Eigen::VectorXd r = current.residual - F0;
+  const double n = static_cast<double>(r.size());
+  const double s2 = r.squaredNorm() / std::max(n - current.rank - static_cast<double>(ns), 1.0) / effective_fraction(r, fit_.N);
+  const Eigen::MatrixXd cov = s2 * (J.transpose() * J).completeOrthogonalDecomposition().pseudoInverse();
+  c.stateful_se.assign(ns, std::numeric_limits<double>::infinity());
+  c.not_identifiable.clear();
+  for (size_t k = 0; k < ns; ++k) {
+    const auto kk = static_cast<Eigen::Index>(k);
+    if (J.col(kk).norm() > 1e-9 * (F0.norm() + 1e-300)) c.stateful_se[k] = std::exp(x[k]) * std::sqrt(std::max(cov(kk, kk), 0.0));
+    if (!(c.stateful_se[k] <= kNotIdentifiable * std::exp(x[k]))) c.not_identifiable.push_back(c.shape[k]->key);
+  }
+}
+
+// The report's parameters of a stateful cause: every fitted key with its standard error, the
+// amplitude the joint fit gave the simulated force (1: as fitted; extended.xml writes the
+// fitted keys), and the keys the data do not determine.
+void Diagnosis::stateful_report(const Candidate& c, double amplitude, nlohmann::json& params, nlohmann::json& se, nlohmann::json& j) const {
+  for (size_t k = 0; k < c.shape.size(); ++k) {
+    params[c.shape[k]->key] = c.shape_values[k];
+    se[c.shape[k]->key] = k < c.stateful_se.size() ? c.stateful_se[k] : std::numeric_limits<double>::infinity();
+  }
+  j["amplitude"] = amplitude;
+  j["not_identifiable"] = c.not_identifiable;
+  j["fitted_by"] = "simulation (output error along the measured motion)";
+}
+
+// The written model's stateful forces on a split (MuJoCo's inverse dynamics of extended.xml
+// leaves them out: they are not regressor columns), as declared: unit amplitude.
+// Only those the written model declares: a cause rejected later (rollouts, the held-out guard) is
+// no longer in extended.xml, and its simulated force must leave the written model's score too.
+Eigen::VectorXd Diagnosis::written_stateful(const SplitData& s, const mjModel* ext) const {
+  Eigen::VectorXd out = Eigen::VectorXd::Zero(s.b.size());
+  for (int k : kept_effects()) {
+    const Candidate& c = cands_[static_cast<size_t>(k)];
+    if (!c.stateful) continue;
+    const std::string name = "spml.plugin.diagnosed_" + std::string(c.plugin->name) + "_" + c.joint_name;
+    if (mj_name2id(ext, mjOBJ_TEXT, name.c_str()) < 0) continue;
+    PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "extended");
+    out += simulated_columns(inst, s).dense().col(0);
+  }
+  return out;
+}
+
+}  // namespace spml::diagnose_detail

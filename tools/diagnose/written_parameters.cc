@@ -1,0 +1,53 @@
+// Stage 6a, the parameters extended.xml states when `parameters` is named. The decision rests on
+// least squares on base parameters (estimate.cc, selection.cc); base parameters do not define
+// bodies, and turned back into per-body values they can be no mass distribution at all (the
+// Panda's links: negative principal moments). What is written comes from the physically
+// consistent fit of spml identify --estimator consistent (envs/identification/: log-Cholesky
+// bodies, Rucker & Wensing 2022; joint terms >= 0; a prior toward the MJCF), made on the same
+// fit split through the same parallel filter, with the effects found fitted jointly as free
+// columns, so that every fitted body is written and the effects' amplitudes go with it.
+#include "diagnosis.h"
+#include "spml/envs/identified_model.h"
+
+namespace spml::diagnose_detail {
+
+WrittenParameters Diagnosis::consistent_parameters() const {
+  Eigen::MatrixXd W = stacked_standard_regressor(*reg_, fit_.split.X, *fit_.cols, opt_.data + ": split " + fit_.name);
+  filter_stacked(fit_.sos, W, fit_.N, fit_.runs);
+  const std::vector<int> effects = kept_effects();
+  Eigen::Index ne = 0;
+  for (int k : effects) ne += cands_[static_cast<size_t>(k)].fit_cols.cols;
+  Eigen::MatrixXd E(W.rows(), ne);
+  Eigen::Index at = 0;
+  for (int k : effects) {
+    const BlockColumns& c = cands_[static_cast<size_t>(k)].fit_cols;
+    E.middleCols(at, c.cols) = c.dense();
+    at += c.cols;
+  }
+  ConsistentOptions o;
+  o.prior_weight = opt_.prior_weight;
+  WrittenParameters w;
+  w.id = fit_consistent(*reg_, W, fit_.b, o, E);
+  w.prediction_fit = W * w.id.pi;
+  if (ne > 0) w.prediction_fit += E * w.id.extra;
+  return w;
+}
+
+// What report.json says about the written parameters (the `parameters` cause's "written").
+nlohmann::json written_parameters_json(const WrittenParameters& w) {
+  const ConsistentIdentification& id = w.id;
+  nlohmann::json bodies = nlohmann::json::object(), terms = nlohmann::json::object();
+  for (const auto& b : id.bodies) {
+    if (!b.fitted) continue;
+    const auto f = b.identified.fullinertia();
+    bodies[b.name] = {{"mass", b.identified.mass}, {"com", {b.identified.com[0], b.identified.com[1], b.identified.com[2]}},
+                      {"fullinertia", f}, {"prior_mass", b.prior.mass}, {"std_error", std::vector<double>(b.std_error.data(), b.std_error.data() + 10)},
+                      {"changed", b.changed}};
+  }
+  for (const auto& t : id.terms)
+    if (t.fitted) terms[t.name] = {{"value", t.value}, {"prior", t.prior}, {"std_error", t.std_error}};
+  return {{"estimator", "consistent"}, {"prior_weight", id.prior_weight}, {"bodies", bodies}, {"terms", terms},
+          {"evaluations", id.evaluations}, {"stop", id.stop}, {"seconds", id.seconds}};
+}
+
+}  // namespace spml::diagnose_detail
