@@ -156,10 +156,18 @@ check::LibraryReport report_of(const Job& job, double timeout) {
 void run_jobs(std::vector<Job>& jobs, size_t parallel, double timeout) {
   size_t next = 0;
   std::vector<Job*> active;
-  auto finish = [](Job* j) {
+  auto finish = [](Job* j) {   // the pipe closed (the child ended, or closed it and runs on)
     close(j->fd);
     j->fd = -1;
-    waitpid(j->pid, &j->status, 0);
+    while (waitpid(j->pid, &j->status, WNOHANG) == 0) {
+      if (std::chrono::steady_clock::now() >= j->deadline) {
+        kill(j->pid, SIGKILL);
+        j->timed_out = true;
+        waitpid(j->pid, &j->status, 0);
+        break;
+      }
+      usleep(10000);
+    }
     j->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - j->started).count();
   };
   while (next < jobs.size() || !active.empty()) {
