@@ -389,5 +389,36 @@ TEST(DiagnoseCases, WrittenModelWorseOnHeldOutDataFallsBackToTheModelAsGiven) {
   EXPECT_TRUE(written_causes(r).empty()) << r["causes"].dump(1);
 }
 
+// report.md and report.json carry units from each joint's type (issue #23 item 2): a slide
+// joint's RMSE is in N and its rollout error in m, a hinge's in N·m and rad.
+TEST(DiagnoseCases, ReportUnitsFollowTheJointType) {
+  const auto dir = test::temp_dir("dc-units");
+  std::mt19937_64 rng(11);
+  std::string xml = test::random_chain(rng, 2, 0);
+  const auto at = xml.find("name=\"j1\" type=\"hinge\"");
+  ASSERT_NE(at, std::string::npos);
+  xml.replace(at, 22, "name=\"j1\" type=\"slide\"");
+  Case c;
+  c.model = (dir / "user.xml").string();
+  c.data = (dir / "data.h5").string();
+  std::ofstream(c.model) << xml;
+  write_dataset(c.data, test::exact_dataset(c.model, c.joints, 800, 1e-3, 5));
+  const fs::path out = dir / "out";
+  const auto r = test::run(spml_diagnose(c, "--no-plots --rollouts 3 --out '" + out.string() + "'"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const auto rep = nlohmann::json::parse(test::read_file((out / "report.json").string()));
+  EXPECT_EQ(rep["joint_units"]["j0"]["torque"], "N·m");
+  EXPECT_EQ(rep["joint_units"]["j1"]["torque"], "N");
+  EXPECT_EQ(rep["joint_units"]["j1"]["position"], "m");
+  const std::string md = test::read_file((out / "report.md").string());
+  auto row = [&](const std::string& j) {
+    const auto p = md.find("| " + j + " | ");
+    return p == std::string::npos ? std::string() : md.substr(p, md.find('\n', p) - p);
+  };
+  EXPECT_NE(row("j0").find(" N·m |"), std::string::npos) << md;
+  EXPECT_NE(row("j1").find(" N |"), std::string::npos) << md;
+  EXPECT_EQ(row("j1").find("N·m"), std::string::npos) << md;
+}
+
 }  // namespace
 }  // namespace spml

@@ -59,6 +59,12 @@ std::string report_summary(const nlohmann::json& r) {
   return s.str();
 }
 
+// " N·m", " rad", ... from report.json's joint_units; empty where the report has none.
+static std::string unit_of(const nlohmann::json& r, const std::string& joint, const char* what) {
+  if (!r.contains("joint_units") || !r["joint_units"].contains(joint)) return "";
+  return " " + r["joint_units"][joint].value(what, "");
+}
+
 std::string report_markdown(const nlohmann::json& r, bool with_plots) {
   std::ostringstream s;
   s << "# spml diagnose\n\n";
@@ -69,7 +75,8 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
   s << "\n## Residual per joint (test split)\n\n| joint | RMSE as given | RMSE final | rel. error as given | rel. error final |\n|---|---|---|---|---|\n";
   for (const auto& j : r["joints"]) {
     const std::string n = j.get<std::string>();
-    s << "| " << n << " | " << num(r["baseline"]["rmse_test"][n].get<double>()) << " | " << num(r["final"]["rmse_test"][n].get<double>())
+    const std::string u = unit_of(r, n, "torque");
+    s << "| " << n << " | " << num(r["baseline"]["rmse_test"][n].get<double>()) << u << " | " << num(r["final"]["rmse_test"][n].get<double>()) << u
       << " | " << pct(r["baseline"]["rel_error_test"][n].get<double>()) << " | " << pct(r["final"]["rel_error_test"][n].get<double>()) << " |\n";
   }
   s << "| all | | | " << pct(r["baseline"]["rel_error_test_all"].get<double>()) << " | " << pct(r["final"]["rel_error_test_all"].get<double>()) << " |\n";
@@ -102,7 +109,8 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
     s << "\n## Rollouts (" << ro["windows"] << " windows of " << num(ro["horizon_s"].get<double>()) << " s under the measured torques)\n\n"
       << "| joint | position error as given | extended |\n|---|---|---|\n";
     for (auto it = ro["position_error_before"].begin(); it != ro["position_error_before"].end(); ++it)
-      s << "| " << it.key() << " | " << num(it.value().get<double>()) << " | " << num(ro["position_error_after"][it.key()].get<double>()) << " |\n";
+      s << "| " << it.key() << " | " << num(it.value().get<double>()) << unit_of(r, it.key(), "position") << " | "
+        << num(ro["position_error_after"][it.key()].get<double>()) << unit_of(r, it.key(), "position") << " |\n";
   } else if (r.contains("rollout")) {
     s << "\nRollouts skipped: " << r["rollout"].value("skipped", "") << "\n";
   }
@@ -119,6 +127,7 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
     for (const auto& n : r["notes"]) s << "- " << n.get<std::string>() << "\n";
   }
   if (with_plots) s << "\n## Plots\n\n![residuals](plots/residuals.png)\n\n![states](plots/states.png)\n";
+  if (with_plots && r.contains("rollout") && r["rollout"].contains("position_error_before")) s << "\n![rollouts](plots/rollouts.png)\n";
   if (with_plots && r.value("unexplained", nlohmann::json::array()).size() > 0)   // #22
     s << "\n![unexplained](plots/unexplained.png)\n";
   return s.str();

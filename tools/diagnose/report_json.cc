@@ -208,6 +208,14 @@ void Diagnosis::build_report(const std::string& out_dir) {
   R["fit_split"] = opt_.fit_split;
   R["test_split"] = test_name_;
   R["joints"] = out_joints_;
+  // Units per joint from its type (hinge or slide), for report.md and the plots.
+  nlohmann::json units = nlohmann::json::object();
+  for (const auto& name : out_joints_) {
+    const int j = mj_name2id(reg_->model(), mjOBJ_JOINT, name.c_str());
+    const bool slide = j >= 0 && reg_->model()->jnt_type[j] == mjJNT_SLIDE;
+    units[name] = {{"torque", slide ? "N" : "N·m"}, {"position", slide ? "m" : "rad"}};
+  }
+  R["joint_units"] = units;
   R["rows"] = {{"fit", fit_.N}, {"test", test_.N}};
   R["settings"] = {{"bic_threshold", opt_.bic_threshold}, {"min_gain", opt_.min_gain}, {"max_causes", opt_.max_causes},
                    {"still_speed", opt_.still_speed}, {"candidates", cands_.size()}};
