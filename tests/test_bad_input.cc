@@ -85,7 +85,7 @@ TEST(BadInput, AnyMjcfIsAParametricModel) {
 TEST(BadInput, ImportNeverOverwritesItsInputNorLeaksRows) {
   const std::string csv = f("in.csv");
   std::ofstream(csv) << "a,y\n1,2\n2,4\n3,6\n4,8\n";
-  expect_error(spml("import " + csv + " --x a --y y -o " + csv), 1, {"in.csv: is an input file"});
+  expect_error(spml("import " + csv + " --x a --y y -o " + csv), 2, {"in.csv: is the input file"});
   std::ifstream in(csv);
   EXPECT_EQ(std::string((std::istreambuf_iterator<char>(in)), {}), "a,y\n1,2\n2,4\n3,6\n4,8\n");
   expect_error(spml("import " + csv + " --x a --y y --split train:0:75% --split test:50%: -o " + f("o.h5")), 1,

@@ -17,6 +17,7 @@
 #include <sstream>
 #include <thread>
 
+#include "spml/output_guard.h"
 #include "spml/envs/parametric_model.h"
 #include "spml/learners/evaluate.h"
 #include "spml/learners/results.h"
@@ -514,6 +515,11 @@ void BenchOptions::check() const {
     if (k.empty() || k.back() == '.' || k.front() == '.') throw LearnerError("--set " + k + "=" + v + ": expected key=value or LEARNER.key=value");
   if (!(heartbeat_seconds >= 0 && std::isfinite(heartbeat_seconds)))
     throw LearnerError("heartbeat_seconds " + number_text(heartbeat_seconds) + ": must be a finite number >= 0");
+  std::vector<std::string> inputs = {data, model};
+  inputs.insert(inputs.end(), other_inputs.begin(), other_inputs.end());
+  // What a run writes into out (temporaries aside): refused as inputs, also before they exist.
+  if (std::string p = input_among_outputs(inputs, out, {"bench.json", "results.csv", "predictions.h5"}, {"units"}); !p.empty())
+    throw LearnerError(p);
 }
 
 BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bool all_requested) {

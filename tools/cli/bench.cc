@@ -97,6 +97,8 @@ void add_bench(CLI::App& app) {
     o.model = *model;
     o.out = *out;
     o.reps = *reps;
+    o.other_inputs = *plugin_paths;   // folders among them are never one of the files bench writes
+    o.other_inputs.insert(o.other_inputs.end(), paths->begin(), paths->end());
     try {
       o.check();   // the library's own check: the C++ API refuses what the command line refuses
     } catch (const LearnerError& e) {

@@ -4,6 +4,7 @@
 
 #include "commands.h"
 #include "spml/import.h"
+#include "spml/output_guard.h"
 #include "spml/parse.h"
 
 namespace spml::cli {
@@ -43,11 +44,9 @@ void add_import(CLI::App& app) {
     if (!a->input.empty()) inputs.push_back(a->input);
     for (const auto& t : a->text) inputs.push_back(t.substr(0, t.find('=')));
     if (a->input.empty() == a->text.empty()) throw CLI::ValidationError("INPUT", "give either INPUT or --text logs");
-    for (const auto& in : inputs) {
+    for (const auto& in : inputs)
       if (!fs::exists(in)) throw DatasetError(in + ": no such file");
-      if (fs::exists(a->out) && fs::equivalent(in, a->out))
-        throw DatasetError(a->out + ": is an input file; choose another --out (import never overwrites its input)");
-    }
+    if (const std::string p = output_is_input(a->out, inputs); !p.empty()) throw CLI::ValidationError("--out", p);
     Conditioning& c = a->spec.conditioning;
     const double lowpass = finite_option("--lowpass", a->lowpass, 0.0, 1e12);
     const auto order = parse_integer(a->order, 2, 12), drop = parse_integer(a->drop, 0, 1000000000),
