@@ -93,4 +93,65 @@ TEST(CliGuards, BenchNeverWritesOverInputsInsideOut) {
   EXPECT_EQ(r.exit_code, 0) << r.output;
 }
 
+// The units of a slide joint's columns follow its type where the model is known (results.csv,
+// predictions.h5, diagnose's notes); without a model every joint counts as a hinge.
+TEST(CliGuards, SlideJointUnitsFollowTheModel) {
+  auto r = spml("bench --data sl.h5 --model sl.xml --out units --learners LLS --reps 1 -q");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const std::string csv = text(dir() / "units/results.csv");
+  EXPECT_NE(csv.find(",tau:j0,0,N·m,LLS,"), std::string::npos) << csv;
+  EXPECT_NE(csv.find(",tau:j1,1,N,LLS,"), std::string::npos) << csv;
+  r = run("/usr/bin/python3 -c \"import h5py, sys; f = h5py.File(sys.argv[1]); print(f.attrs['units'], f.attrs['input_units'])\" " +
+          (dir() / "units/predictions.h5").string());
+  EXPECT_EQ(r.output, "N·m,N rad,m,rad/s,rad/s²,m/s,m/s²\n");
+  r = spml("bench --data sl.h5 --out nomodel --learners GP --reps 1 --train-max 100 --test-max 100 -q");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(text(dir() / "nomodel/results.csv").find(",tau:j1,1,N·m,GP,"), std::string::npos);
+  // The stroke of the slide joint is a length.
+  r = spml("diagnose --model sl.xml --data sl.h5 --out dsl --no-plots --rollouts 0");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const std::string report = text(dir() / "dsl/report.json");
+  EXPECT_NE(report.find("\"the stroke (0.07"), std::string::npos) << report;
+  EXPECT_NE(report.find(" m) spans fewer than 3 periods"), std::string::npos) << report;
+  EXPECT_EQ(report.find(" rad) spans"), std::string::npos) << report;
+}
+
+// Error messages name the file, the element and the problem.
+TEST(CliGuards, MessagesNameFileElementAndProblem) {
+  // A Latin-1 joint name: --json names the model, the field and the byte.
+  std::string latin1 = kSlideModel;
+  latin1.replace(latin1.find("name=\"j1\""), 9, "name=\"j\xe9\"");
+  std::ofstream(dir() / "nu.xml") << latin1;
+  expect_error(spml("regressor --model nu.xml --json"), 1, {"nu.xml: --json field 'names': '", "is not valid UTF-8 (byte 0xe9 at offset"});
+  // A plugin folder with a non-UTF-8 name.
+  const fs::path odd = dir() / "p\xff";
+  fs::create_directories(odd);
+  fs::copy_file(fs::path(SPML_BROKEN_DIR) / "force_none.so", odd / "force_none.so", fs::copy_options::overwrite_existing);
+  expect_error(spml("plugins --json --plugin-path 'p\xff'"), 1, {"plugins --json: --json field 'file': '", "is not valid UTF-8 (byte 0xff"});
+  // A repeated time stamp, by its line in the file.
+  std::ofstream(dir() / "dup.csv") << "t,q:j0,tau:j0\n0.001,0.1,1\n0.002,0.2,2\n0.002,0.2,2\n0.003,0.3,3\n0.004,0.4,4\n";
+  expect_error(spml("import dup.csv --t t --x q:j0 --y tau:j0 --derive --out dup.h5"), 1,
+               {"dup.csv: column 't': time stamps must increase; line 4 repeats t = 0.002 of line 3"});
+  // An unnamed free joint: its type, not only its index.
+  std::string free = kSlideModel;
+  free.replace(free.find("<body name=\"l0\">"), 0, "<body name=\"fb\" pos=\"0 0 2\"><freejoint/><inertial pos=\"0 0 0\" mass=\"1\" diaginertia=\"0.1 0.1 0.1\"/></body>");
+  std::ofstream(dir() / "free.xml") << free;
+  expect_error(spml("generate --model free.xml --duration 1 --out free.csv"), 1,
+               {"free.xml: joint 0 (free, unnamed, in body 'fb') is a ball or free joint"});
+  EXPECT_FALSE(fs::exists(dir() / "free.csv"));
+}
+
+TEST(CliGuards, ImportAndBenchOptionsThatCannotWork) {
+  std::ofstream(dir() / "semi.csv") << "# logger v1\nt;a;y\n0;1,5;2\n";
+  expect_error(spml("import semi.csv --delimiter ';' --comment '' --x a --y y --out semi.h5"), 2, {"--comment: is empty"});
+  expect_error(spml("import semi.csv --delimiter ';' --comment ';' --x a --y y --out semi.h5"), 2,
+               {"--comment: ';' holds the cell delimiter ';'"});
+  expect_error(spml("import semi.csv --delimiter ';' --comment '#' --x a --y y --out semi.h5"), 1,
+               {"semi.csv:3: column 'a': '1,5' is not a finite number (decimal commas are not read"});
+  EXPECT_FALSE(fs::exists(dir() / "semi.h5"));
+  expect_error(spml("bench --data sl.h5 --out dupset --learners GP --set max_evals=5 --set max_evals=6"), 2,
+               {"--set: 'max_evals' is given twice (max_evals=5 and max_evals=6)"});
+  EXPECT_FALSE(fs::exists(dir() / "dupset"));
+}
+
 }  // namespace
