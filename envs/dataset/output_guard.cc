@@ -15,12 +15,8 @@ bool same_file(const fs::path& a, const fs::path& b) {
 // `p` lies below the folder `dir` (both resolved through links; the folder need not exist).
 bool inside(const fs::path& p, const fs::path& dir) {
   std::error_code ec;
-  const fs::path a = fs::weakly_canonical(p, ec), d = fs::weakly_canonical(dir, ec);
-  auto i = a.begin();
-  for (auto j = d.begin(); j != d.end(); ++j, ++i)
-    if (j->empty()) continue;   // a trailing separator
-    else if (i == a.end() || *i != *j) return false;
-  return i != a.end();
+  const fs::path rel = fs::weakly_canonical(p, ec).lexically_relative(fs::weakly_canonical(dir, ec));
+  return !rel.empty() && rel != "." && *rel.begin() != "..";
 }
 
 }  // namespace
