@@ -8,6 +8,7 @@
 #include <stdexcept>
 
 #include "signals.h"
+#include "spml/envs/mujoco_model.h"
 #include "spml/import.h"
 #include "spml/signal.h"
 
@@ -77,9 +78,9 @@ std::vector<std::string> joint_names(const mjModel* m, const std::string& source
   std::vector<std::string> names;
   for (int j = 0; j < m->njnt; ++j) {
     const char* n = mj_id2name(m, mjOBJ_JOINT, j);
-    if (!n || !*n) throw std::runtime_error(source + ": joint " + std::to_string(j) + " has no name; every joint needs one for the data columns");
     if (m->jnt_type[j] != mjJNT_HINGE && m->jnt_type[j] != mjJNT_SLIDE)
-      throw std::runtime_error(source + ": joint '" + std::string(n) + "' is a ball or free joint; only hinge and slide joints can be measured");
+      throw std::runtime_error(source + ": " + joint_description(m, j) + " is a ball or free joint; only hinge and slide joints can be measured");
+    if (!n || !*n) throw std::runtime_error(source + ": " + joint_description(m, j) + " has no name; every joint needs one for the data columns");
     names.emplace_back(n);
   }
   return names;

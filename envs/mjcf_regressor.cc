@@ -40,13 +40,9 @@ Eigen::Matrix<double, 6, 10> body_wrench(const Eigen::Vector3d& w, const Eigen::
 // Joint j's name, or an error naming its index, type and body: the regressor takes hinge and
 // slide joints, and names parameters and data columns (q:<joint>) after them.
 std::string checked_joint_name(const mjModel* m, int j, const std::string& file) {
-  static const char* kType[4] = {"free", "ball", "slide", "hinge"};
   const int type = m->jnt_type[j];
   const char* name = mj_id2name(m, mjOBJ_JOINT, j);
-  const char* body = mj_id2name(m, mjOBJ_BODY, m->jnt_bodyid[j]);
-  const std::string which = "joint " + std::to_string(j) + " (" + (type >= 0 && type < 4 ? kType[type] : "unknown") +
-                            (name ? ", '" + std::string(name) + "'" : std::string(", unnamed")) + ", in body " +
-                            (body ? "'" + std::string(body) + "'" : "#" + std::to_string(m->jnt_bodyid[j])) + ")";
+  const std::string which = joint_description(m, j);
   if (type != mjJNT_HINGE && type != mjJNT_SLIDE)
     throw std::runtime_error(file + ": " + which + ": the regressor supports hinge and slide joints only (a free or ball "
                                                    "joint has no single-axis torque to identify)");

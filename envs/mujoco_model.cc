@@ -17,6 +17,16 @@ ModelPtr load_mjcf(const std::string& path) {
   return ModelPtr(m);
 }
 
+std::string joint_description(const mjModel* m, int j) {
+  static const char* kType[4] = {"free", "ball", "slide", "hinge"};
+  const int type = m->jnt_type[j];
+  const char* name = mj_id2name(m, mjOBJ_JOINT, j);
+  const char* body = mj_id2name(m, mjOBJ_BODY, m->jnt_bodyid[j]);
+  return "joint " + std::to_string(j) + " (" + (type >= 0 && type < 4 ? kType[type] : "unknown") +
+         (name && *name ? ", '" + std::string(name) + "'" : std::string(", unnamed")) + ", in body " +
+         (body ? "'" + std::string(body) + "'" : "#" + std::to_string(m->jnt_bodyid[j])) + ")";
+}
+
 std::string mjcf_dir() {
   if (const char* env = std::getenv("SPML_MJCF_DIR"); env && *env) return env;
   return (std::filesystem::path(spml_share_dir()) / "mjcf").string();

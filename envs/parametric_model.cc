@@ -31,6 +31,8 @@ class MjcfModel : public ParametricModel {
     param_names = base_.names;
     prior = base_.model_values;
     outputs = static_cast<int>(layout.Y.cols());
+    for (int j = 0; j < reg_.model()->njnt; ++j)
+      if (reg_.model()->jnt_type[j] == mjJNT_SLIDE) slide_joints.push_back(reg_.joint_names()[static_cast<size_t>(j)]);
     // The dataset's truth applies when it is stated in these same parameters.
     if (ds.model.param_names == param_names && ds.model.truth.size() == num_params()) truth = ds.model.truth;
   }

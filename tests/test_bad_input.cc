@@ -85,7 +85,7 @@ TEST(BadInput, AnyMjcfIsAParametricModel) {
 TEST(BadInput, ImportNeverOverwritesItsInputNorLeaksRows) {
   const std::string csv = f("in.csv");
   std::ofstream(csv) << "a,y\n1,2\n2,4\n3,6\n4,8\n";
-  expect_error(spml("import " + csv + " --x a --y y -o " + csv), 1, {"in.csv: is an input file"});
+  expect_error(spml("import " + csv + " --x a --y y -o " + csv), 2, {"in.csv: is the input file"});
   std::ifstream in(csv);
   EXPECT_EQ(std::string((std::istreambuf_iterator<char>(in)), {}), "a,y\n1,2\n2,4\n3,6\n4,8\n");
   expect_error(spml("import " + csv + " --x a --y y --split train:0:75% --split test:50%: -o " + f("o.h5")), 1,
@@ -202,7 +202,7 @@ TEST(Hardening, ImportRefusesLeaksDisorderAndOddOutputs) {
   EXPECT_EQ(r.exit_code, 0) << r.output;
   std::ofstream(f("unsorted.csv")) << "t,a,y\n0,1,2\n0.2,2,4\n0.1,3,6\n0.3,4,8\n";
   expect_error(spml("import " + f("unsorted.csv") + " --x a --y y --t t -o " + f("i3.h5")), 1,
-               {"unsorted.csv: column 't': rows are not in time order (data row 3: t = 0.1 after t = 0.2)"});
+               {"unsorted.csv: column 't': rows are not in time order (line 4: t = 0.1 after t = 0.2)"});
   // -o that is a folder is named as given, not as the temporary file.
   fs::create_directories(f("outdir"));
   expect_error(spml("import " + csv + " --x a --y y -o " + f("outdir")), 1, {f("outdir") + ": is a directory"});

@@ -216,7 +216,7 @@ TEST(Generate, BadInputIsRefusedWithAClearMessage) {
   std::ofstream(ball) << "<mujoco><worldbody><body><joint name=\"b\" type=\"ball\"/><geom size=\"0.1\"/></body></worldbody></mujoco>";
   auto r = test::run(spml + " generate --model " + ball + " --out " + (dir / "x.csv").string());
   EXPECT_EQ(r.exit_code, 1);
-  EXPECT_NE(r.output.find("joint 'b' is a ball or free joint"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("joint 0 (ball, 'b', in body #1) is a ball or free joint"), std::string::npos) << r.output;
   r = test::run(spml + " generate --model " + arm_path() + " --derive --out " + (dir / "x.csv").string());
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.output.find("--derive"), std::string::npos) << r.output;

@@ -701,6 +701,10 @@ TEST(Results, SchemaTwoNamesOutputsAndSchemaOneIsStillRead) {
   EXPECT_EQ(column_unit("q:joint1"), "rad");
   EXPECT_EQ(column_unit("force:carriage"), "N");
   EXPECT_EQ(column_unit("y"), "");
+  // A slide joint's columns, where the model says so.
+  EXPECT_EQ(column_unit("tau:j1", std::vector<std::string>{"j1"}), "N");
+  EXPECT_EQ(column_unit("qdd:j1", std::vector<std::string>{"j1"}), "m/s²");
+  EXPECT_EQ(column_unit("q:j10", std::vector<std::string>{"j1"}), "rad");
 }
 
 // --set GP.key=value reaches only GP and wins over the unscoped value; a scope that is not a

@@ -160,10 +160,13 @@ Table read_csv_table(const std::string& path, const CsvDialect& dialect) {
       const auto v = parse_number(csv.rows[r][c]);
       if (!v)
         fail(path + ":" + std::to_string(csv.line[r]) + ": column '" + csv.header[c] + "': '" + csv.rows[r][c] +
-             "' is not a finite number");
+             "' is not a finite number" +
+             (dialect.delimiter != ',' && csv.rows[r][c].find(',') != std::string::npos
+                  ? " (decimal commas are not read: export with decimal points)" : ""));
       cols[c][static_cast<Eigen::Index>(r)] = *v;
     }
   t.columns = std::move(cols);
+  t.lines = csv.line;
   return t;
 }
 
@@ -480,13 +483,24 @@ Dataset table_to_dataset(const Table& table, const ImportSpec& spec) {
   if (!spec.t.empty()) {
     std::string n;
     tcol = resolve_column(table, spec.t, n);
-    for (Eigen::Index i = 1; i < tcol.size(); ++i)
-      if (tcol[i] < tcol[i - 1]) {
-        std::ostringstream msg;
-        msg << table.source << ": column '" << spec.t << "': rows are not in time order (data row " << i + 1 << ": t = "
-            << tcol[i] << " after t = " << tcol[i - 1] << "); sort the rows by time before importing";
-        fail(msg.str());
-      }
+    // Where a row is in the file: its line for a CSV, else its place among the data rows.
+    auto place = [&](Eigen::Index i) {
+      const auto r = static_cast<size_t>(i);
+      return r < table.lines.size() ? "line " + std::to_string(table.lines[r]) : "data row " + std::to_string(i + 1);
+    };
+    for (Eigen::Index i = 1; i < tcol.size(); ++i) {
+      std::ostringstream msg;
+      msg << table.source << ": column '" << spec.t << "': ";
+      if (tcol[i] < tcol[i - 1])
+        msg << "rows are not in time order (" << place(i) << ": t = " << tcol[i] << " after t = " << tcol[i - 1]
+            << "); sort the rows by time before importing";
+      else if (tcol[i] == tcol[i - 1] && spec.conditioning.any())   // filters and differences need a step
+        msg << "time stamps must increase; " << place(i) << " repeats t = " << tcol[i] << " of " << place(i - 1)
+            << " (remove the duplicate row)";
+      else
+        continue;
+      fail(msg.str());
+    }
   }
   condition(spec.conditioning, table.source, tcol, xs, xn, ys);
   const Eigen::Index N = xs.front().size();

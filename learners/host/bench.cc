@@ -17,6 +17,8 @@
 #include <sstream>
 #include <thread>
 
+#include "spml/json_utf8.h"
+#include "spml/output_guard.h"
 #include "spml/envs/parametric_model.h"
 #include "spml/learners/evaluate.h"
 #include "spml/learners/results.h"
@@ -365,17 +367,10 @@ void remove_stale_temporaries(const std::string& out, const std::function<void(c
 
 // Every text bench.json would hold must be UTF-8 (JSON cannot hold anything else): checked
 // before anything is written, naming the value (a path with a Latin-1 byte, a --set value).
-void check_utf8_fields(const nlohmann::json& j, const std::string& out, const std::string& field = "") {
-  if (j.is_string()) {
-    const std::string& text = j.get_ref<const std::string&>();
-    if (const std::string why = utf8_problem(text); !why.empty())
-      throw LearnerError(text + ": " + (field.empty() ? "" : "bench.json field '" + field + "': ") + why + "; " + out +
-                         "/bench.json is JSON, which holds only UTF-8 text");
-  } else if (j.is_object()) {
-    for (const auto& [k, v] : j.items()) check_utf8_fields(v, out, k);
-  } else if (j.is_array()) {
-    for (const auto& v : j) check_utf8_fields(v, out, field);
-  }
+void check_utf8_fields(const nlohmann::json& j, const std::string& out) {
+  if (const JsonUtf8Problem p = json_utf8_problem(j); !p.why.empty())
+    throw LearnerError(p.text + ": " + (p.field.empty() ? "" : "bench.json field '" + p.field + "': ") + p.why + "; " + out +
+                       "/bench.json is JSON, which holds only UTF-8 text");
 }
 
 // bench.json describes the run whose results.csv and predictions.h5 lie beside it. A run with
@@ -464,7 +459,7 @@ MatrixFile fit_unit(Learner& learner, const std::vector<Part>& parts, const Lear
 // results.csv rows and predictions of one learner from its units (all repetitions present).
 void aggregate(const std::string& scenario, const std::string& name, bool deterministic, int reps,
                const std::vector<MatrixFile>& units, const std::vector<Part>& parts, const std::vector<std::string>& outputs,
-               std::vector<ResultRow>& rows, MatrixFile& predictions) {
+               const std::vector<std::string>& slide_joints, std::vector<ResultRow>& rows, MatrixFile& predictions) {
   double fitsec = 0;
   std::string warnings;
   for (const auto& u : units) {
@@ -495,7 +490,7 @@ void aggregate(const std::string& scenario, const std::string& name, bool determ
     for (size_t k = 0; k < rmse.size(); ++k) {
       const Summary a = summarize(rmse[k]), b = summarize(nllh[k]);
       rows.push_back({scenario, part.name, name, static_cast<int>(k), a.mean, a.std, a.min, a.max, b.mean, b.std, b.min,
-                      b.max, static_cast<int>(units.size()), fitsec, warnings, outputs[k], column_unit(outputs[k])});
+                      b.max, static_cast<int>(units.size()), fitsec, warnings, outputs[k], column_unit(outputs[k], slide_joints)});
     }
   }
 }
@@ -514,6 +509,11 @@ void BenchOptions::check() const {
     if (k.empty() || k.back() == '.' || k.front() == '.') throw LearnerError("--set " + k + "=" + v + ": expected key=value or LEARNER.key=value");
   if (!(heartbeat_seconds >= 0 && std::isfinite(heartbeat_seconds)))
     throw LearnerError("heartbeat_seconds " + number_text(heartbeat_seconds) + ": must be a finite number >= 0");
+  std::vector<std::string> inputs = {data, model};
+  inputs.insert(inputs.end(), other_inputs.begin(), other_inputs.end());
+  // What a run writes into out (temporaries aside): refused as inputs, also before they exist.
+  if (std::string p = input_among_outputs(inputs, out, {"bench.json", "results.csv", "predictions.h5"}, {"units"}); !p.empty())
+    throw LearnerError(p);
 }
 
 BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bool all_requested) {
@@ -591,9 +591,11 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bo
   predictions.attributes["data"] = fs::absolute(o.data).string();
   predictions.attributes["scenario"] = scenario;
   // The outputs by name and unit, in the column order of every y, mean and std (format 2).
-  auto listed = [](const std::vector<std::string>& columns, bool units) {
+  // Units follow the model's joint types; without a model every joint counts as a hinge.
+  const std::vector<std::string> slide_joints = model ? model->slide_joints : std::vector<std::string>();
+  auto listed = [&](const std::vector<std::string>& columns, bool units) {
     std::string text;
-    for (size_t i = 0; i < columns.size(); ++i) text += (i ? "," : "") + (units ? column_unit(columns[i]) : columns[i]);
+    for (size_t i = 0; i < columns.size(); ++i) text += (i ? "," : "") + (units ? column_unit(columns[i], slide_joints) : columns[i]);
     return text;
   };
   predictions.attributes["outputs"] = listed(train_split.y_columns, false);
@@ -675,7 +677,7 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bo
       }
     }
     if (static_cast<int>(units.size()) == fits)
-      aggregate(scenario, name, deterministic, o.reps, units, parts, train_split.y_columns, rows, predictions);
+      aggregate(scenario, name, deterministic, o.reps, units, parts, train_split.y_columns, slide_joints, rows, predictions);
   }
 
   // predictions.h5 first: when it cannot be written (a full disk), no results.csv claims the run.

@@ -108,14 +108,6 @@ std::string results_line(const ResultRow& r) {
 std::vector<ResultRow> read_results(const std::string& path) { return parse_rows(path, false); }
 std::vector<ResultRow> read_published_table(const std::string& path) { return parse_rows(path, true); }
 
-std::string column_unit(const std::string& column) {
-  static const std::pair<const char*, const char*> kPrefixes[] = {
-      {"tau:", "N·m"}, {"force:", "N"}, {"qdd:", "rad/s²"}, {"qd:", "rad/s"}, {"q:", "rad"}};
-  for (const auto& [prefix, unit] : kPrefixes)
-    if (column.rfind(prefix, 0) == 0) return unit;
-  return column == "t" ? "s" : "";
-}
-
 std::string output_label(const ResultRow& row) {
   if (row.output_name.empty()) return "output " + std::to_string(row.output);
   return row.unit.empty() ? row.output_name : row.output_name + " [" + row.unit + "]";

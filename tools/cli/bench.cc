@@ -91,12 +91,17 @@ void add_bench(CLI::App& app) {
     for (const auto& kv : *sets) {
       const auto eq = kv.find('=');
       if (eq == std::string::npos || eq == 0) throw CLI::ValidationError("--set", "'" + kv + "': expected key=value");
+      for (const auto& [k, v] : o.config.values)
+        if (k == kv.substr(0, eq))
+          throw CLI::ValidationError("--set", "'" + k + "' is given twice (" + k + "=" + v + " and " + kv + "): give it once");
       o.config.values.emplace_back(kv.substr(0, eq), kv.substr(eq + 1));
     }
     o.data = *data;
     o.model = *model;
     o.out = *out;
     o.reps = *reps;
+    o.other_inputs = *plugin_paths;   // folders among them are never one of the files bench writes
+    o.other_inputs.insert(o.other_inputs.end(), paths->begin(), paths->end());
     try {
       o.check();   // the library's own check: the C++ API refuses what the command line refuses
     } catch (const LearnerError& e) {
@@ -164,7 +169,7 @@ void add_compare(CLI::App& app) {
       auto r = read_results(f);
       rows.insert(rows.end(), r.begin(), r.end());
     }
-    if (*json) std::cout << compare_json(rows, *published).dump(2) << "\n";
+    if (*json) std::cout << json_output(compare_json(rows, *published), "compare --json");
     else std::cout << compare_report(rows, *published);
   });
 }
@@ -187,7 +192,7 @@ void add_learners(CLI::App& app) {
         list.push_back({{"name", n}, {"summary", l->summary ? l->summary : ""}, {"file", registry.plugin_file(n)},
                         {"flags", learner_flags(l->flags)}, {"config_keys", keys}});
       }
-      std::cout << nlohmann::json{{"learners", list}, {"compositions", {"A-B", "it-A-B"}}}.dump(2) << "\n";
+      std::cout << json_output(nlohmann::json{{"learners", list}, {"compositions", {"A-B", "it-A-B"}}}, "learners --json");
       return;
     }
     for (const auto& n : registry.plugin_names()) {
@@ -222,7 +227,7 @@ void add_plugins(CLI::App& app) {
         list.push_back({{"name", n}, {"summary", p->summary ? p->summary : ""}, {"file", catalog.file_of(n)},
                         {"linear", p->regressor != nullptr}, {"config_keys", keys}, {"shape_params", shapes}});
       }
-      std::cout << nlohmann::json{{"plugins", list}}.dump(2) << "\n";
+      std::cout << json_output(nlohmann::json{{"plugins", list}}, "plugins --json");
       return;
     }
     for (const auto& n : catalog.names()) {

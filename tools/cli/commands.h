@@ -3,6 +3,7 @@
 #pragma once
 
 #include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
 #include <cstdint>
 #include <string>
 #include <utility>
@@ -40,6 +41,9 @@ long row_cap_option(const std::string& option, const std::string& text);
 // s as one word for /bin/sh (single quotes; a quote inside becomes '\''): the plot
 // scripts are run through std::system.
 std::string shell_quote(const std::string& s);
+// j as --json prints it (indented, newline); throws naming `source`, the field and the text when
+// a text is not UTF-8 (JSON holds nothing else: a Latin-1 joint name, a folder name).
+std::string json_output(const nlohmann::json& j, const std::string& source);
 // --plugin-path folders or files, added to the process's force-plugin catalog.
 void add_plugin_paths(const std::vector<std::string>& paths);
 

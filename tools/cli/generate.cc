@@ -8,6 +8,7 @@
 #include "commands.h"
 #include "spml/envs/measured_run.h"
 #include "spml/envs/scenarios.h"
+#include "spml/output_guard.h"
 #include "spml/parse.h"
 
 namespace spml::cli {
@@ -67,6 +68,10 @@ MeasurementOptions measurement_options(const ModelArgs& a, std::uint64_t seed) {
 
 void generate_model(const ModelArgs& a, const std::string& out, std::uint64_t seed) {
   if (out.empty()) throw std::invalid_argument("--model needs --out FILE (.csv: a text log for spml import; else spml/1)");
+  std::vector<std::string> inputs = a.plugin_paths;   // folders among them never equal a file
+  inputs.push_back(a.model);
+  if (a.excitation.rfind("file:", 0) == 0) inputs.push_back(a.excitation.substr(5));
+  if (const std::string p = output_is_input(out, inputs); !p.empty()) throw CLI::ValidationError("--out", p);
   add_plugin_paths(a.plugin_paths);
   const MeasurementOptions o = measurement_options(a, seed);
   const bool csv = std::filesystem::path(out).extension() == ".csv";

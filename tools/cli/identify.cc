@@ -66,7 +66,7 @@ void add_regressor(CLI::App& app) {
       j["benchmark_rows_per_second"] = rows / s;
       j["benchmark_checksum"] = sink;
     }
-    if (a->json) { std::cout << j.dump(2) << "\n"; return; }
+    if (a->json) { std::cout << json_output(j, a->model); return; }
     std::cout << a->model << ": " << reg.param_names().size() << " standard parameters, " << base.rank
               << " base parameters\n  " << rank_decision_text(base, reg.param_names().size()) << "\n";
     for (int i = 0; i < base.rank; ++i)
@@ -110,7 +110,7 @@ void add_identify(CLI::App& app) {
                      {"sigma", id.sigma}, {"condition_number", id.condition}};
     for (const auto& e : id.errors)
       j["errors"].push_back({{"split", e.split}, {"rows", e.rows}, {"relative_error", e.relative_error}, {"rmse", e.rmse}});
-    if (a->json) { std::cout << j.dump(2) << "\n"; return; }
+    if (a->json) { std::cout << json_output(j, a->model); return; }
     std::cout << "identified on '" << a->split << "' of " << a->data << " (condition number " << id.condition
               << ", residual std " << id.sigma << ")\n  base parameters: " << rank_decision_text(base, reg.param_names().size())
               << "\n";

@@ -1,5 +1,7 @@
 #include "identify_consistent.h"
 
+#include "commands.h"
+
 #include <filesystem>
 #include <iomanip>
 #include <iostream>
@@ -123,7 +125,7 @@ void identify_consistent_command(const ConsistentArgs& a) {
     if (!a.write_model.empty()) j["written_model"] = a.write_model;
     j["notes"] = notes;
     if (!ls) j["least_squares_failure"] = ls_failure;
-    std::cout << j.dump(2) << "\n";
+    std::cout << json_output(j, a.model);
     return;
   }
   print(a, id, ls);

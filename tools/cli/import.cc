@@ -4,6 +4,7 @@
 
 #include "commands.h"
 #include "spml/import.h"
+#include "spml/output_guard.h"
 #include "spml/parse.h"
 
 namespace spml::cli {
@@ -36,18 +37,16 @@ void add_import(CLI::App& app) {
   cmd->add_option("--split", a->splits, "NAME:BEGIN:END in rows or percent, e.g. train:0:64% test:64%: (default: all rows as 'train')");
   cmd->add_option("--format", a->format, "input format")->check(CLI::IsMember({"auto", "csv", "mat"}));
   cmd->add_option("--delimiter", a->delimiter, "CSV cell delimiter: one character, or 'tab' (default ',')");
-  cmd->add_option("--comment", a->dialect.comment, "CSV lines starting with this text are skipped (e.g. '#'; default: none)");
-  cmd->callback([a] {
+  auto* comment = cmd->add_option("--comment", a->dialect.comment, "CSV lines starting with this text are skipped (e.g. '#'; default: none)");
+  cmd->callback([a, comment] {
     namespace fs = std::filesystem;
     std::vector<std::string> inputs;
     if (!a->input.empty()) inputs.push_back(a->input);
     for (const auto& t : a->text) inputs.push_back(t.substr(0, t.find('=')));
     if (a->input.empty() == a->text.empty()) throw CLI::ValidationError("INPUT", "give either INPUT or --text logs");
-    for (const auto& in : inputs) {
+    for (const auto& in : inputs)
       if (!fs::exists(in)) throw DatasetError(in + ": no such file");
-      if (fs::exists(a->out) && fs::equivalent(in, a->out))
-        throw DatasetError(a->out + ": is an input file; choose another --out (import never overwrites its input)");
-    }
+    if (const std::string p = output_is_input(a->out, inputs); !p.empty()) throw CLI::ValidationError("--out", p);
     Conditioning& c = a->spec.conditioning;
     const double lowpass = finite_option("--lowpass", a->lowpass, 0.0, 1e12);
     const auto order = parse_integer(a->order, 2, 12), drop = parse_integer(a->drop, 0, 1000000000),
@@ -66,6 +65,10 @@ void add_import(CLI::App& app) {
       throw CLI::ValidationError("--delimiter", "'" + a->delimiter + "' is not one character other than a quote, space or newline (or 'tab')");
     if (a->dialect.comment.find_first_of(" \t\n\r") != std::string::npos)
       throw CLI::ValidationError("--comment", "'" + a->dialect.comment + "' holds a blank or newline");
+    if (comment->count() && a->dialect.comment.empty())
+      throw CLI::ValidationError("--comment", "is empty: every line would be a comment (leave --comment out to skip none)");
+    if (a->dialect.comment.find(d) != std::string::npos)
+      throw CLI::ValidationError("--comment", "'" + a->dialect.comment + "' holds the cell delimiter '" + a->delimiter + "'");
     a->dialect.delimiter = d[0];
     if ((a->delimiter != "," || !a->dialect.comment.empty()) && (fmt != "csv" || !a->text.empty()))
       throw CLI::ValidationError("--delimiter", "--delimiter and --comment apply to CSV input only");

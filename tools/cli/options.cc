@@ -1,5 +1,6 @@
 #include "commands.h"
 #include "spml/force_effects.h"
+#include "spml/json_utf8.h"
 #include "spml/parse.h"
 
 #include <sstream>
@@ -60,6 +61,13 @@ std::string shell_quote(const std::string& s) {
   std::string q = "'";
   for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
   return q + "'";
+}
+
+std::string json_output(const nlohmann::json& j, const std::string& source) {
+  if (const JsonUtf8Problem p = json_utf8_problem(j); !p.why.empty())
+    throw std::runtime_error(source + ": " + (p.field.empty() ? "" : "--json field '" + p.field + "': ") + "'" + p.text + "' is " +
+                             p.why + "; --json prints JSON, which holds only UTF-8 text (run without --json, or rename it)");
+  return j.dump(2) + "\n";
 }
 
 void add_plugin_paths(const std::vector<std::string>& paths) {

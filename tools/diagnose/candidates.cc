@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "diagnosis.h"
+#include "spml/column_unit.h"
 #include "spml/parse.h"
 
 namespace spml::diagnose_detail {
@@ -94,7 +95,7 @@ bool Diagnosis::bound_wavenumber(Candidate& c, double stroke) {
     lo = std::max(lo, std::ceil(opt_.min_ripple_periods * 2 * M_PI / std::max(stroke, 1e-12)));
     if (lo > hi) {
       not_tried_.push_back({{"effect", "ripple"}, {"joint", c.joint_name},
-                            {"reason", "the stroke (" + fmt(stroke) + " rad) spans fewer than " + fmt(opt_.min_ripple_periods) +
+                            {"reason", "the stroke (" + fmt(stroke) + " " + column_unit("q:", reg_->model()->jnt_type[c.joint] == mjJNT_SLIDE) + ") spans fewer than " + fmt(opt_.min_ripple_periods) +
                                            " periods of any wavenumber the plugin allows: a ripple cannot be told from a smooth residual"}});
       return false;
     }

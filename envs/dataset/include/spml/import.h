@@ -17,6 +17,7 @@ struct Table {
   std::vector<Eigen::VectorXd> columns;
   std::map<std::string, double> scalars; // 1x1 variables of a .mat file (gains, constants)
   std::vector<std::string> left_out;     // .mat vectors of another length than the columns, "name (n samples)"
+  std::vector<size_t> lines;             // CSV: the file line of each row (for messages); else empty
   Eigen::Index rows() const { return columns.empty() ? 0 : columns.front().size(); }
 };
 

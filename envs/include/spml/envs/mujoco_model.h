@@ -17,6 +17,10 @@ using DataPtr = std::unique_ptr<mjData, DataDeleter>;
 ModelPtr load_mjcf(const std::string& path);
 inline DataPtr make_data(const mjModel* m) { return DataPtr(mj_makeData(m)); }
 
+// Joint j as messages name it: "joint 0 (free, unnamed, in body 'base')", "joint 2 (slide,
+// 'j1', in body #3)": its type, its name if any and its body.
+std::string joint_description(const mjModel* m, int j);
+
 // Directory holding the project's MJCF models: $SPML_MJCF_DIR, else <share>/spml/mjcf.
 std::string mjcf_dir();
 std::string mjcf_path(const std::string& file);   // mjcf_dir()/file

@@ -35,6 +35,8 @@ class ParametricModel {
   std::vector<std::string> param_names;
   Eigen::VectorXd prior, truth;   // empty when unknown
   int outputs = 0;
+  // The model's slide joints (their columns are in N, m, ...; every other joint is a hinge).
+  std::vector<std::string> slide_joints;
 };
 
 // An analytic model written per input row: features(x) is outputs x params.

@@ -46,6 +46,9 @@ struct BenchOptions {
   // merge: the shard folders, shard k's at k - 1; unit u is read from folder u % size() (the
   // shard that fitted it) and copied into out/units. Empty: units are read from out/units.
   std::vector<std::string> unit_sources;
+  // Other files the run reads (force-plugin and learner libraries): like data and model, they
+  // must not be among the files the run writes into out.
+  std::vector<std::string> other_inputs;
 
   // Throws LearnerError naming the option (as the command line spells it) when a value is out
   // of range; run_bench() calls it, and so does `spml bench` before it loads anything.

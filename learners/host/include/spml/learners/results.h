@@ -4,7 +4,7 @@
 //   scenario,split,output,output_index,unit,algo,rmsemean,rmsestd,rmsemin,rmsemax,nllhmean,nllhstd,nllhmin,nllhmax,fits,fitsec,warnings
 //
 // `output` is the dataset's Y column name (`tau:joint0`), `output_index` its position, `unit`
-// the unit of RMSE (from the name's prefix, see column_unit; empty when unknown). Schema 1
+// the unit of RMSE (from the name's prefix and the model's joint type, see column_unit; empty when unknown). Schema 1
 // (no `output_index` column; `output` the index) is still read: its rows get no name or unit.
 // One row per (scenario, test split, output, learner); statistics over the repetitions (std
 // with ddof = 0); NLLH "inf" for learners without a variance; `fits` how many fits were made
@@ -15,6 +15,8 @@
 
 #include <string>
 #include <vector>
+
+#include "spml/column_unit.h"   // the unit column
 
 namespace spml {
 
@@ -38,9 +40,6 @@ std::vector<ResultRow> read_results(const std::string& path);
 // Reads one of the paper's tables (algo,rmsemean,...; "-" = not given, "inf").
 std::vector<ResultRow> read_published_table(const std::string& path);
 
-// The unit of a dataset column, from its name's prefix: `tau:` N·m, `force:` N, `q:` rad,
-// `qd:` rad/s, `qdd:` rad/s², `t` s; "" for any other name (Toy's `y`, user features).
-std::string column_unit(const std::string& column);
 // "tau:joint0 [N·m]", "y", or "output 2" for a schema-1 row.
 std::string output_label(const ResultRow& row);
 
