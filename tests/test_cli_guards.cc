@@ -128,6 +128,7 @@ TEST(CliGuards, MessagesNameFileElementAndProblem) {
   fs::create_directories(odd);
   fs::copy_file(fs::path(SPML_BROKEN_DIR) / "force_none.so", odd / "force_none.so", fs::copy_options::overwrite_existing);
   expect_error(spml("plugins --json --plugin-path 'p\xff'"), 1, {"plugins --json: --json field 'file': '", "is not valid UTF-8 (byte 0xff"});
+  expect_error(spml("check-plugin --json 'p\xff/force_none.so'"), 1, {"check-plugin --json: ", "is not valid UTF-8 (byte 0xff"});
   // A repeated time stamp, by its line in the file.
   std::ofstream(dir() / "dup.csv") << "t,q:j0,tau:j0\n0.001,0.1,1\n0.002,0.2,2\n0.002,0.2,2\n0.003,0.3,3\n0.004,0.4,4\n";
   expect_error(spml("import dup.csv --t t --x q:j0 --y tau:j0 --derive --out dup.h5"), 1,

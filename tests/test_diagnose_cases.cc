@@ -404,7 +404,7 @@ TEST(DiagnoseCases, ReportUnitsFollowTheJointType) {
   std::ofstream(c.model) << xml;
   write_dataset(c.data, test::exact_dataset(c.model, c.joints, 800, 1e-3, 5));
   const fs::path out = dir / "out";
-  const auto r = test::run(spml_diagnose(c, "--no-plots --rollouts 3 --out '" + out.string() + "'"));
+  const auto r = test::run(spml_diagnose(c, "--no-plots --out '" + out.string() + "'"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   const auto rep = nlohmann::json::parse(test::read_file((out / "report.json").string()));
   EXPECT_EQ(rep["joint_units"]["j0"]["torque"], "N·m");

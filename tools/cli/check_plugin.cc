@@ -298,7 +298,8 @@ void add_check_plugin(CLI::App& app) {
     }
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     if (*json)
-      std::cout << nlohmann::json{{"libraries", libraries}, {"clauses", clauses}, {"failed", failed}, {"seconds", seconds}}.dump(2) << "\n";
+      std::cout << json_output(nlohmann::json{{"libraries", libraries}, {"clauses", clauses}, {"failed", failed}, {"seconds", seconds}},
+                               "check-plugin --json");
     else
       std::cout << files->size() << " libraries, " << clauses << " clauses, " << failed << " failed, in " << number_text(seconds, 3) << " s\n";
     if (failed) throw std::runtime_error("check-plugin: " + std::to_string(failed) + " of " + std::to_string(clauses) + " clauses failed");

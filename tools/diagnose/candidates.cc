@@ -146,6 +146,27 @@ BlockColumns Diagnosis::columns_of(const Candidate& c, const SplitData& s) const
 // does. Such a fit is the regression spending a dissipative column on something else (rounding,
 // a constraint's stick phases), not a cause. Terms that are not sign-definite (ripple, offset)
 // are free. Checked on the unfiltered columns: the filter smears signs at reversals.
+// A viscous column (proportional to q̇ wherever it acts, e.g. asymmetric friction's fv_pos) adds
+// to the joint's own MJCF damping: a negative coefficient lowers that damping and feeds the joint
+// energy only beyond it (EMPS: damping 200, fv_pos -33.6 is a correction, not a pump).
+bool Diagnosis::within_damping(const Eigen::VectorXd& col, int joint, double coef) const {
+  const mjModel* m = reg_->model();
+  const Eigen::Index N = fit_.N;
+  double slope = 0;
+  for (Eigen::Index o = 0; o * N < col.size(); ++o) {
+    const auto qd = fit_.split.X.col(fit_.cols->qd[static_cast<size_t>(out_joint_index_[static_cast<size_t>(o)])]);
+    for (Eigen::Index i = 0; i < N; ++i) {
+      const double v = col[o * N + i];
+      if (v == 0) continue;
+      if (std::abs(qd[i]) < 1e-12) return false;
+      const double r = v / qd[i];
+      if (slope == 0) slope = r;
+      else if (std::abs(r - slope) > 1e-9 * std::abs(slope)) return false;   // not proportional to q̇
+    }
+  }
+  return slope > 0 && m->dof_damping[m->jnt_dofadr[joint]] + slope * coef >= 0;
+}
+
 std::string Diagnosis::injects_energy(const Candidate& c, const Eigen::VectorXd& theta) const {
   PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
   const BlockColumns cols = columns(inst, fit_, false);
@@ -164,7 +185,7 @@ std::string Diagnosis::injects_energy(const Candidate& c, const Eigen::VectorXd&
         acts |= power < 0;
       }
     }
-    if (opposes && acts)
+    if (opposes && acts && !within_damping(C.col(k), c.joint, theta[k]))
       return names[static_cast<size_t>(k)] + " = " + fmt(theta[k]) + " < 0 on a term that opposes the motion at every sample: negative "
              "friction would feed the joint energy, not dissipate it";
   }

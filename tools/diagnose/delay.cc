@@ -81,6 +81,13 @@ double Diagnosis::uniform_step(const SplitData& s) const {
 
 // Targets of a split from torques shifted by d (through its parallel filter when the torques
 // are filtered), and y0 = b - given.
+// The torques less MuJoCo's frictionloss correction (the soft constraint's difference from the
+// regressor's ideal Coulomb column, load.cc): left in, its structure near zero speed was taken
+// for an offset in time (a 6.5 ms delay named on undelayed data of a model with frictionloss).
+Eigen::VectorXd Diagnosis::net_of_frictionloss(const SplitData& s) const {
+  return s.friction.size() ? Eigen::VectorXd(s.b - s.friction) : s.b;
+}
+
 Eigen::VectorXd Diagnosis::targets_at(const SplitData& s, double d) const {
   Eigen::VectorXd b = stacked_targets(shifted_columns(s.split.Y, d, uniform_step(s)));
   if (filter_plan_.torques) filter_stacked(s.sos, b, s.N);
@@ -122,9 +129,10 @@ void Diagnosis::estimate_delay() {
   // samples averages neighbours and lowers the noise itself, which a fractional offset would
   // then be credited with (exact-input draws named a delay on white noise that way).
   const BlockColumns nuisance = coulomb_nuisance(fit_);
+  const Eigen::VectorXd target = net_of_frictionloss(fit_);
   auto projected = [&](double d) {
     const BlockColumns base = shifted_block(fit_.base, d, h), nuis = shifted_block(nuisance, d, h);
-    return fit_blocks({&base, &nuis}, fit_.b, false).residual;
+    return fit_blocks({&base, &nuis}, target, false).residual;
   };
   auto rss = [&](double d) { return projected(d).squaredNorm(); };
   const double step = std::max(h / 4, 2 * delay_.range / 100);
@@ -168,8 +176,8 @@ void Diagnosis::delay_decide(double d, const std::function<Eigen::VectorXd(doubl
   // Held out: the base parameters refitted on the fit split with and without the shift.
   auto test_rss = [&](double dd) {
     const BlockColumns bf = shifted_block(fit_.base, dd, h), bt = shifted_block(test_.base, dd, uniform_step(test_));
-    const Fit f = fit_blocks({&bf}, fit_.b, false);
-    return (test_.b - bt.times(f.coef)).squaredNorm();
+    const Fit f = fit_blocks({&bf}, net_of_frictionloss(fit_), false);
+    return (net_of_frictionloss(test_) - bt.times(f.coef)).squaredNorm();
   };
   const bool evidence = delay_.delta_bic > opt_.bic_threshold && std::fabs(d) > 3 * delay_.stderr_ && std::fabs(d) >= kMinDelay;
   // Raw differences (the filter was detected, not recorded): the errors in the regressors

@@ -160,6 +160,7 @@ class Diagnosis {
   // created again), else its reason: a negative band level is not a friction band.
   std::string refused(int candidate, const Eigen::VectorXd& theta) const;
   std::string injects_energy(const Candidate& c, const Eigen::VectorXd& theta) const;
+  bool within_damping(const Eigen::VectorXd& col, int joint, double coef) const;
   // shape_search.cc
   double search_shape(Candidate& c, const Fit& current);
   // estimate.cc
@@ -196,6 +197,7 @@ class Diagnosis {
   void delay_decide(double d, const std::function<Eigen::VectorXd(double)>& projected, int rank);
   double uniform_step(const SplitData& s) const;
   Eigen::VectorXd targets_at(const SplitData& s, double d) const;
+  Eigen::VectorXd net_of_frictionloss(const SplitData& s) const;
   BlockColumns coulomb_nuisance(const SplitData& s) const;
   nlohmann::json delay_report() const;
   nlohmann::json delay_cause() const;
