@@ -72,7 +72,9 @@ nlohmann::json rejected_causes(const nlohmann::json& causes) {
   for (const auto& c : causes) {
     if (c.contains("rejected"))
       out.push_back(c["effect"].get<std::string>() + (c["effect"] == "parameters" ? "" : "@" + c["joints"][0].get<std::string>()));
-    for (const auto& [joint, r] : c.value("rejected_joint_terms", nlohmann::json::object()).items()) out.push_back("parameters@" + joint);
+    // Bound to a name: items() of a temporary would iterate a json that died (ASan: stack-use-after-scope).
+    const nlohmann::json terms = c.value("rejected_joint_terms", nlohmann::json::object());
+    for (const auto& [joint, r] : terms.items()) out.push_back("parameters@" + joint);
   }
   return out;
 }
