@@ -153,7 +153,7 @@ bool Diagnosis::confirm_in_simulation(const std::string& ext_path, MjcfEdits& ed
 namespace spml::diagnose_detail {
 namespace {
 
-bool is_diagnosed(const std::pair<std::string, std::string>& text) { return text.first.rfind("spml.plugin.diagnosed_", 0) == 0; }
+bool is_diagnosed(const std::pair<std::string, std::string>& text) { return text.first.rfind(kDiagnosedPrefix, 0) == 0; }
 
 }  // namespace
 

@@ -84,6 +84,10 @@ struct Candidate {
 
 bool is_stateful(const spml_force_plugin& p);   // #22: advance/reset and no regressor
 
+// The <custom><text> name a named effect is declared under in extended.xml.
+inline constexpr const char* kDiagnosedPrefix = "spml.plugin.diagnosed_";
+inline std::string declaration_name(const Candidate& c) { return kDiagnosedPrefix + std::string(c.plugin->name) + "_" + c.joint_name; }
+
 // #22: the offset between torques and states (delay.cc).
 struct DelayResult {
   double seconds = 0, stderr_ = std::numeric_limits<double>::infinity(), delta_bic = 0, range = 0;

@@ -165,7 +165,7 @@ nlohmann::json Diagnosis::effect_cause(size_t i, const Fit& final_fit, bool free
   if (!kept) j["superseded_by"] = cause.superseded_by;
   if (!j_written.is_null()) j["params_written"] = j_written;
   if (kept) {
-    const std::string name = "spml.plugin.diagnosed_" + std::string(c.plugin->name) + "_" + c.joint_name;
+    const std::string name = declaration_name(c);
     if (config.empty())
       notes.push_back(std::string("plugin '") + c.plugin->name + "' cannot write its configuration (no write_config): " + name + " is not in the extended model");
     else if (c.joint_name.find_first_of(" \t\n\r,") != std::string::npos)

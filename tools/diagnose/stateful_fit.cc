@@ -268,8 +268,7 @@ Eigen::VectorXd Diagnosis::written_stateful(const SplitData& s, const mjModel* e
   for (int k : kept_effects()) {
     const Candidate& c = cands_[static_cast<size_t>(k)];
     if (!c.stateful) continue;
-    const std::string name = "spml.plugin.diagnosed_" + std::string(c.plugin->name) + "_" + c.joint_name;
-    if (mj_name2id(ext, mjOBJ_TEXT, name.c_str()) < 0) continue;
+    if (mj_name2id(ext, mjOBJ_TEXT, declaration_name(c).c_str()) < 0) continue;
     PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "extended");
     out += simulated_columns(inst, s).dense().col(0);
   }
