@@ -314,7 +314,9 @@ TEST(Diagnose, PandaExampleFindsTheDefaultsAndTheFriction) {
   for (const auto& c : rep["causes"]) {
     std::vector<nlohmann::json> records;
     if (c.contains("rejected")) records.push_back(c["rejected"]);
-    for (const auto& [joint, rec] : c.value("rejected_joint_terms", nlohmann::json::object()).items()) records.push_back(rec);
+    // value() returns a temporary: bound first, items() only refers to it.
+    const nlohmann::json rejected_terms = c.value("rejected_joint_terms", nlohmann::json::object());
+    for (const auto& [joint, rec] : rejected_terms.items()) records.push_back(rec);
     for (const auto& rec : records)
       for (const auto& j : c["joints"])
         if (c["effect"] != "parameters" && rec.contains("rollout_error_with")) {   // others: refused or the held-out guard

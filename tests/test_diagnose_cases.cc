@@ -358,9 +358,11 @@ TEST(DiagnoseCases, CleanDataOfTheModelItselfGetNoCause) {
 TEST(DiagnoseCases, NegativeFrictionLevelsAreRefused) {
   const auto r = diagnose_own_data("dc-fl", reviewer_arm(R"(frictionloss="1.5")"), 0, 0);
   EXPECT_TRUE(written_causes(r).empty()) << r["causes"].dump(1);
-  for (const auto& c : r["causes"])
-    for (const auto& [k, v] : c.value("params_written", nlohmann::json::object()).items())
+  for (const auto& c : r["causes"]) {
+    const nlohmann::json written = c.value("params_written", nlohmann::json::object());   // a temporary otherwise
+    for (const auto& [k, v] : written.items())
       if (k.find(".f") != std::string::npos || k.find(".level") != std::string::npos) EXPECT_GE(v.get<double>(), 0) << k;
+  }
   expect_final_not_worse(r);
 }
 
