@@ -33,7 +33,7 @@ constexpr double kMinShare = 0.1;       // held-out variance share the GP must e
 // torque noise, and the smooth errors of derived velocities and accelerations, which a GP over
 // the states partly predicts - gave at most 5.2 times on clean draws (a share of 0.66 through a
 // qdd: input, and 0.29 in a reviewer's draw), effects outside the vocabulary 60 times and more
-// (DiagnoseBeyond.CleanJointsHaveNoUnexplainedStructure, ...OutsideTheVocabulary...).
+// (DiagnoseBeyond.CleanJointsHaveNoUnexplainedStructure, ...CubicDampingAndAnEndStop...).
 constexpr double kNoiseMargin = 10;
 constexpr Eigen::Index kFitRows = 200;  // rows the GP is fitted on (evenly spaced; cubic cost)
 constexpr Eigen::Index kTestRows = 1500;
@@ -101,7 +101,7 @@ nlohmann::json Diagnosis::unexplained_joint(size_t o, const Eigen::VectorXd& r_f
   // Relevance per input: the held-out share lost when the GP is made blind to it (its length
   // scale taken to 1e6, the other hyper-parameters kept). 1 / l^2 alone ranks an input the
   // kernel varies fast along, however little it moves the prediction: it put qdd:j2 first
-  // for a spring on j1 (test DiagnoseBeyond.AnEffectOutsideTheVocabulary...).
+  // for a spring on j1 (a draw of an earlier test, the spring outside the vocabulary then).
   const gp::Hyper& hyper = g->fit.hyper;
   const Eigen::VectorXd ard = hyper.lengthscales.array().square().inverse() / hyper.lengthscales.array().square().inverse().sum();
   Eigen::VectorXd rel(ard.size());
