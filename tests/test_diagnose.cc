@@ -206,8 +206,9 @@ TEST(Diagnose, NamesExactlyWhatWasHidden) {
     const double final_err = r["final_internal"]["rel_error_test_all"].get<double>();
     const double written_err = r["final"]["rel_error_test_all"].get<double>(), given_err = r["baseline"]["rel_error_test_all"].get<double>();
     EXPECT_LE(written_err, 1.02 * given_err) << "draw " << i << "\n" << r["notes"].dump(1);
-    if ((r["parameters_written"] != "partial" && r["parameters_written"] != "none") || !named.count("parameters"))
+    if ((r["parameters_written"] != "partial" && r["parameters_written"] != "none") || !named.count("parameters")) {
       EXPECT_LE(written_err, 1.1 * m.true_rel_error_test) << "draw " << i << ": the written model\n" << r["notes"].dump(1);
+    }
     const bool ok = named == d.expected && final_err <= 1.1 * m.true_rel_error_test;
     if (!ok) ++failures;
     std::string expected_text;

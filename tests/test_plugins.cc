@@ -221,8 +221,9 @@ TEST(ForcePlugins, ASecondDeclarationThatFailsReleasesTheFirst) {
 }
 
 TEST(ForcePlugins, AbiMismatchIsRejected) {
-  setenv("SPML_PLUGIN_PATH", SPML_TEST_PLUGIN_DIR, 1);
+  // As $SPML_PLUGIN_PATH would add it; the variable itself is read once per process, when the
+  // catalog is first used, so setting it here would not reach a catalog an earlier test built.
+  spml::force_plugins().add(SPML_TEST_PLUGIN_DIR, false);
   std::string err = error_of(decl("w", "type=wrong_abi joints=a"));
-  unsetenv("SPML_PLUGIN_PATH");
   EXPECT_NE(err.find("spml_force_wrong_abi.so: force plugin ABI version 99, this spml speaks version 3"), std::string::npos) << err;
 }

@@ -12,6 +12,7 @@
 #include "diagnosis.h"
 #include "report.h"
 #include "spml/matrix_file.h"
+#include "spml/output_guard.h"
 
 namespace spml {
 namespace diagnose_detail {
@@ -60,19 +61,13 @@ namespace fs = std::filesystem;
 // the rest of the same run.
 const char* const kOutputs[] = {"extended.xml", "series.csv", "unexplained.csv", "report.md", "report.json"};
 
+// The same file-identity check as generate, import and bench (spml/output_guard.h).
 void refuse_inputs_among_outputs(const DiagnoseOptions& o, const fs::path& out) {
   std::vector<std::string> inputs = {o.model, o.data};
   inputs.insert(inputs.end(), o.more_data.begin(), o.more_data.end());
   inputs.insert(inputs.end(), o.cross.begin(), o.cross.end());
-  const fs::path plots = fs::weakly_canonical(out / "plots");
-  for (const auto& in : inputs) {
-    const fs::path p = fs::weakly_canonical(in);
-    bool hit = p.parent_path() == plots;
-    for (const char* name : kOutputs) hit |= p == fs::weakly_canonical(out / name);
-    if (hit)
-      throw std::runtime_error(in + ": is one of the files diagnose writes into --out " + out.string() +
-                               ": it would be overwritten; copy it elsewhere or choose another --out");
-  }
+  if (const std::string p = input_among_outputs(inputs, out.string(), {std::begin(kOutputs), std::end(kOutputs)}, {"plots"}); !p.empty())
+    throw std::runtime_error(p);
 }
 
 // The staged folder is removed on every way out; its files are moved into out_dir together.
