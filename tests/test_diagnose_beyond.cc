@@ -9,9 +9,12 @@
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <functional>
 #include <iostream>
 #include <map>
 #include <random>
+#include <tuple>
+#include <cstdlib>
 
 #include "spml/dataset.h"
 #include "spml/diagnose.h"
@@ -43,32 +46,55 @@ Case make_case(const std::filesystem::path& dir, const std::string& tag, unsigne
   return c;
 }
 
-// 10 s at 1 kHz under the PD controller, 1 % torque noise, 18-bit encoders; the torque log
-// delayed by `delay_samples` ticks (it reads the torque of that many ticks before); imported
-// with a 10 Hz low-pass, derived, decimated to 200 Hz, 70/30 split.
-std::string measured(const Case& c, const std::string& path, unsigned seed, int delay_samples = 0, double lowpass_hz = 10) {
+// How one draw is measured: 10 s at 1 kHz under the PD controller, torque noise (a fraction
+// of each joint's RMS torque), encoders of `bits`; the torque log delayed by `delay_samples`
+// ticks (it reads the torque of that many ticks before); imported with a low-pass, derived,
+// decimated to 200 Hz, 70/30 split.
+struct Measurement {
+  double torque_noise = 0.01;
+  int bits = 18;
+  int delay_samples = 0;
+  double lowpass_hz = 10;
+  // A torque outside the plugin vocabulary, added to the logged torque of joint `extra_joint`
+  // as a function of its true position and velocity: a robot with that force needs exactly
+  // this much more torque along the motion it made (inverse dynamics is additive).
+  int extra_joint = -1;
+  std::function<double(double q, double qd)> extra;
+};
+
+std::string measured(const Case& c, const std::string& path, unsigned seed, const Measurement& m) {
   MeasurementOptions o;
   o.duration = 10;
   o.rate = 1000;
-  o.torque_noise = 0.01;
-  o.encoder_bits = 18;
+  o.torque_noise = m.torque_noise;
+  o.encoder_bits = m.bits;
   o.seed = seed;
   o.excitation.seed = seed + 17;
   MeasuredRun run = simulate_measured(c.truth, o);
-  if (delay_samples > 0) {
+  if (m.extra && m.extra_joint >= 0)
+    for (Eigen::Index i = 0; i < run.tau.rows(); ++i)   // no jitter: sample i is tick i
+      run.tau(i, m.extra_joint) += m.extra(run.tick_qpos(i, m.extra_joint), run.tick_qvel(i, m.extra_joint));
+  if (m.delay_samples > 0) {
     const Eigen::MatrixXd tau = run.tau;
-    for (Eigen::Index i = 0; i < tau.rows(); ++i) run.tau.row(i) = tau.row(std::max<Eigen::Index>(0, i - delay_samples));
+    for (Eigen::Index i = 0; i < tau.rows(); ++i) run.tau.row(i) = tau.row(std::max<Eigen::Index>(0, i - m.delay_samples));
   }
   ImportSpec spec;
   for (const auto& j : run.joints) spec.x.push_back("q:" + j), spec.y.push_back("tau:" + j);
   spec.t = "t";
   spec.conditioning.derive = true;
-  spec.conditioning.lowpass_hz = lowpass_hz;
+  spec.conditioning.lowpass_hz = m.lowpass_hz;
   spec.conditioning.drop_edges = 200;
   spec.conditioning.decimate = 5;
   spec.splits = {parse_split_range("train:0:70%"), parse_split_range("test:70%:")};
   write_dataset(path, table_to_dataset(measured_table(run, path), spec));
   return path;
+}
+
+std::string measured(const Case& c, const std::string& path, unsigned seed, int delay_samples = 0, double lowpass_hz = 10) {
+  Measurement m;
+  m.delay_samples = delay_samples;
+  m.lowpass_hz = lowpass_hz;
+  return measured(c, path, seed, m);
 }
 
 nlohmann::json diagnose_case(const Case& c, const std::string& data) {
@@ -95,6 +121,14 @@ std::string joined(const std::vector<std::string>& v) {
   return s.empty() ? "nothing" : s;
 }
 
+// The RMS torque of joint j of a model along the test excitation (2 s, no noise).
+double rms_torque(const std::string& model, int j) {
+  MeasurementOptions probe;
+  probe.duration = 2;
+  probe.torque_noise = 0;
+  return simulate_measured(model, probe).rms[j];
+}
+
 // Delays of 2-10 ms between torque and position logs (a sub-sample offset at the 200 Hz the
 // data are decimated to): `delay` within 1 ms, and no friction cause; clean data: no delay.
 TEST(DiagnoseBeyond, DelayIsNamedWithinAMillisecondAndCleanDataHaveNone) {
@@ -118,14 +152,6 @@ TEST(DiagnoseBeyond, DelayIsNamedWithinAMillisecondAndCleanDataHaveNone) {
     EXPECT_NEAR(est, 1e-3 * delays_ms[k], 1e-3);
     for (const auto& n : causes) EXPECT_EQ(n, "delay") << "a cause beside the delay: " << joined(causes);
   }
-}
-
-// The RMS torque of joint j of a model along the test excitation (2 s, no noise).
-double rms_torque(const std::string& model, int j) {
-  MeasurementOptions probe;
-  probe.duration = 2;
-  probe.torque_noise = 0;
-  return simulate_measured(model, probe).rms[j];
 }
 
 // LuGre friction (stick_slip) hidden on one joint of a random chain, its break-away force 1.5x
@@ -162,7 +188,9 @@ TEST(DiagnoseBeyond, LuGreFrictionIsNamedStickSlipWithItsLevels) {
           const std::string pre = cause["effect"] == "stribeck" ? "j" + std::to_string(joint) + "." : "";
           EXPECT_NEAR(p[pre + "fc"].get<double>(), fc, 0.2 * fc);
           EXPECT_NEAR(p[pre + "fs"].get<double>(), fs, 0.2 * fs);
-          if (cause["effect"] == "stick_slip") EXPECT_NE(cause["not_identifiable"].dump().find("sigma0"), std::string::npos);
+          if (cause["effect"] == "stick_slip") {
+            EXPECT_NE(cause["not_identifiable"].dump().find("sigma0"), std::string::npos);
+          }
         }
       EXPECT_TRUE(friction) << joined(causes);
       continue;
@@ -181,36 +209,196 @@ TEST(DiagnoseBeyond, LuGreFrictionIsNamedStickSlipWithItsLevels) {
   }
 }
 
-// An effect outside the vocabulary: a joint spring (MJCF stiffness) the user's model lacks,
-// about 15 % of the joint's RMS torque over its stroke. No candidate is a spring: diagnose
-// must not name a cause whose rollouts get worse, and must report the joint as unexplained
-// with its own position as the most relevant input.
-TEST(DiagnoseBeyond, AnEffectOutsideTheVocabularyIsReportedUnexplained) {
-  const auto dir = test::temp_dir("unexplained");
-  for (unsigned k = 0; k < 2; ++k) {
-    const int joint = static_cast<int>((k + 1) % 3);
-    const Case user = make_case(dir, "u" + std::to_string(k), 0x5e1f0u + k, "", joint);
-    const double stiffness = 0.3 * rms_torque(user.user, joint);
-    std::string xml = test::read_file(user.user);
-    const std::string tag = "<joint name=\"j" + std::to_string(joint) + "\" ";
-    xml.replace(xml.find(tag), tag.size(), tag + "stiffness=\"" + test::num(stiffness) + "\" ");
-    Case c = user;
-    c.truth = (dir / ("spring" + std::to_string(k) + ".xml")).string();
-    std::ofstream(c.truth) << xml;
-    const auto r = diagnose_case(c, measured(c, (dir / ("u" + std::to_string(k) + ".h5")).string(), 90 + k));
-    std::cout << "spring " << stiffness << " on j" << joint << ": named " << joined(named(r)) << "\n  unexplained " << r["unexplained"].dump()
-              << "\n  rollout worse on " << r["rollout"]["worse_on"].dump() << "\n";
-    bool found = false;
-    for (const auto& u : r["unexplained"])
-      if (u["joint"] == "j" + std::to_string(joint)) {
-        found = true;
-        EXPECT_EQ(u["inputs"][0], "q:j" + std::to_string(joint));
+}  // namespace
+}  // namespace spml
+
+namespace spml {
+namespace {
+
+// One seeded draw of a kind: "clean", "delay" (the torque log SPML_BEYOND_DELAY_MS / `delay_ms`
+// late), "delay_coulomb" (and Coulomb friction of 10 % of its RMS torque on another joint),
+// "lugre" (LuGre friction of random levels on a random joint), "cubic" (cubic damping of 20 %
+// of the joint's RMS torque), "stop" (a one-sided end stop over the top fifth of the joint's
+// stroke, 0.6 of its RMS torque at the far end): the last two are outside the vocabulary.
+struct Draw {
+  Case c;
+  Measurement m;
+  int joint = 0, other = 0;
+  double fc = 0, fs = 0;   // lugre: the true levels
+  std::string what;
+};
+
+Draw make_draw(const std::filesystem::path& dir, const std::string& kind, int s, double delay_ms, Measurement m) {
+  Draw d;
+  const auto seed = static_cast<unsigned>(0x7ab1e00 + s);
+  std::mt19937_64 rng(seed);
+  d.joint = static_cast<int>(rng() % 3), d.other = (d.joint + 1 + static_cast<int>(rng() % 2)) % 3;
+  const std::string tag = kind + std::to_string(s);
+  d.c = make_case(dir, tag, seed, "", d.joint);
+  const double rms = rms_torque(d.c.user, d.joint);
+  std::string decl;
+  d.what = kind;
+  if (kind == "delay" || kind == "delay_coulomb") m.delay_samples = static_cast<int>(std::lround(delay_ms));   // 1 kHz: 1 tick = 1 ms
+  if (kind == "delay_coulomb") decl = "type=coulomb joints=j" + std::to_string(d.other) + " fc=" + test::num(0.1 * rms_torque(d.c.user, d.other));
+  if (kind == "lugre") {
+    std::uniform_real_distribution<double> u(0, 1);
+    d.fc = (0.06 + 0.09 * u(rng)) * rms, d.fs = (1.2 + 0.8 * u(rng)) * d.fc;
+    const double sigma0 = d.fc / (1e-3 + 2e-3 * u(rng)), vs = 0.03 + 0.2 * u(rng);
+    decl = "type=stick_slip joints=JOINT fc=" + test::num(d.fc) + " fs=" + test::num(d.fs) + " vs=" + test::num(vs) + " sigma0=" +
+           test::num(sigma0) + " sigma1=" + test::num(0.05 * std::sqrt(sigma0)) + " sigma2=0";
+  }
+  if (kind == "cubic" || kind == "stop") {
+    MeasurementOptions probe;   // the same excitation as the draw's (measured() seeds it alike)
+    probe.duration = 10;
+    probe.torque_noise = 0;
+    probe.seed = seed + 100;
+    probe.excitation.seed = seed + 117;
+    const MeasuredRun run = simulate_measured(d.c.user, probe);
+    const Eigen::VectorXd q = run.tick_qpos.col(d.joint), v = run.tick_qvel.col(d.joint);
+    if (kind == "cubic") {
+      const double cc = 0.2 * rms / std::sqrt(v.array().pow(6).mean());
+      m.extra = [cc](double, double qd) { return cc * qd * qd * qd; };
+      d.what += " c=" + test::num(cc);
+    } else {
+      std::vector<double> sorted(q.data(), q.data() + q.size());
+      std::sort(sorted.begin(), sorted.end());
+      const double lim = sorted[sorted.size() * 8 / 10], k = 0.6 * rms / (sorted.back() - lim);
+      m.extra = [lim, k](double qq, double) { return qq > lim ? -k * (qq - lim) : 0.0; };
+      d.what += " lim=" + test::num(lim) + " k=" + test::num(k);
+    }
+    m.extra_joint = d.joint;
+  }
+  if (!decl.empty()) {
+    d.c = make_case(dir, tag, seed, decl, d.joint);
+    d.what += " " + decl;
+  }
+  d.m = m;
+  return d;
+}
+
+nlohmann::json run_draw(const std::filesystem::path& dir, const Draw& d, int s) {
+  return diagnose_case(d.c, measured(d.c, (dir / (d.what.substr(0, d.what.find(' ')) + std::to_string(s) + ".h5")).string(),
+                                     static_cast<unsigned>(0x7ab1e00 + s) + 100, d.m));
+}
+
+Measurement noise_level(double torque_noise, int bits) {
+  Measurement m;
+  m.torque_noise = torque_noise;
+  m.bits = bits;
+  return m;
+}
+
+// The reviewer's first finding: a 5 ms delay on data where another joint has Coulomb friction
+// the model lacks (10 % of its RMS torque) was missed (0.20 ± 0.52 ms) and `parameters` named:
+// the held-out test of the delay refitted the base parameters without the friction nuisance,
+// so the friction's residual swamped the gain. Now: `delay` within 1 ms, no `parameters`, and
+// no cause on a joint without friction. (The estimate sits 0.3-0.4 ms below the truth on these
+// draws, as clean draws read -0.2 to -0.4 ms: central differences of semi-implicit Euler
+// positions put the velocity half a tick ahead of the logged torque.)
+TEST(DiagnoseBeyond, DelayIsFoundBesideStaticFriction) {
+  const auto dir = test::temp_dir("delay_coulomb");
+  for (int s : {1, 3}) {
+    const Draw d = make_draw(dir, "delay_coulomb", s, 5, Measurement{});
+    const auto r = run_draw(dir, d, s);
+    const auto causes = named(r);
+    std::cout << "5 ms delay, Coulomb on j" << d.other << ": estimated " << 1e3 * r["delay"]["seconds"].get<double>() << " ± "
+              << 1e3 * r["delay"]["stderr"].get<double>() << " ms, named " << joined(causes) << "\n";
+    ASSERT_TRUE(r["delay"]["named"].get<bool>()) << r["delay"].dump();
+    EXPECT_NEAR(r["delay"]["seconds"].get<double>(), 5e-3, 1e-3);
+    for (const auto& n : causes)
+      if (n != "delay") {
+        EXPECT_EQ(n.substr(n.find('@') + 1), "j" + std::to_string(d.other)) << "a cause beside the delay: " << joined(causes);
       }
+  }
+}
+
+// LuGre on a random joint of a random spatial 3-joint chain, random levels (fc 6-15 % of the
+// joint's RMS torque, fs 1.2-2 fc, vs 0.03-0.23 rad/s, pre-sliding 1-3 mrad), positions only,
+// 1 % torque noise, 18-bit encoders, derivatives through the usual 10 Hz low-pass: `stick_slip`
+// on that joint with fc and fs within 20 %. Draw 3 was `coulomb` before the stateful fit
+// started from the static fits and was compared with them held out.
+TEST(DiagnoseBeyond, LuGreIsNamedOnRealisticDataAgainstTheStaticCandidates) {
+  const auto dir = test::temp_dir("lugre10");
+  for (int s : {3, 0}) {
+    const Draw d = make_draw(dir, "lugre", s, 0, Measurement{});
+    const auto r = run_draw(dir, d, s);
+    const auto causes = named(r);
+    std::cout << d.what << " on j" << d.joint << ": named " << joined(causes) << "\n";
+    const std::string want = "stick_slip@j" + std::to_string(d.joint);
+    ASSERT_NE(std::find(causes.begin(), causes.end(), want), causes.end()) << joined(causes);
+    for (const auto& cause : r["causes"])
+      if (cause["effect"] == "stick_slip" && !cause.contains("superseded_by")) {
+        std::cout << "  " << cause["params"].dump() << "\n";
+        EXPECT_NEAR(cause["params"]["fc"].get<double>(), d.fc, 0.2 * d.fc);
+        EXPECT_NEAR(cause["params"]["fs"].get<double>(), d.fs, 0.2 * d.fs);
+      }
+  }
+}
+
+// Clean data at realistic noise (0.5 %, 1 %, 2 % torque noise with 20-, 18-, 16-bit encoders,
+// derived velocities and accelerations): no `unexplained` entry. Draw 3 at 1 % had one through
+// qdd:j1 with share 0.66 before the noise margin (a GP predicts part of the derivative errors).
+TEST(DiagnoseBeyond, CleanJointsHaveNoUnexplainedStructure) {
+  const auto dir = test::temp_dir("clean_unexplained");
+  const std::vector<std::tuple<int, double, int>> draws = {{3, 0.01, 18}, {1, 0.005, 20}, {2, 0.02, 16}};
+  for (const auto& [s, noise, bits] : draws) {
+    const Draw d = make_draw(dir, "clean", s, 0, noise_level(noise, bits));
+    const auto r = run_draw(dir, d, s);
+    std::cout << "clean draw " << s << " at " << 100 * noise << " % noise: unexplained " << r["unexplained"].dump() << "\n";
+    EXPECT_TRUE(r["unexplained"].empty()) << r["unexplained"].dump();
+  }
+}
+
+// Effects outside the vocabulary: cubic damping and a one-sided end stop. No cause named whose
+// rollouts get worse; an `unexplained` entry on the effect's joint with the right input first
+// (qd: for the damping, q: for the stop), and none on the clean joints (draw 3 gave one on a
+// clean j0 with share 0.14 before the noise margin).
+TEST(DiagnoseBeyond, CubicDampingAndAnEndStopAreReportedUnexplainedOnTheirInput) {
+  const auto dir = test::temp_dir("outside");
+  for (const auto& [kind, s, input] : std::vector<std::tuple<std::string, int, std::string>>{{"cubic", 3, "qd:"}, {"stop", 0, "q:"}}) {
+    const Draw d = make_draw(dir, kind, s, 0, Measurement{});
+    const auto r = run_draw(dir, d, s);
+    const std::string joint = "j" + std::to_string(d.joint);
+    std::cout << d.what << " on " << joint << ": named " << joined(named(r)) << "\n  unexplained " << r["unexplained"].dump() << "\n";
+    bool found = false;
+    for (const auto& u : r["unexplained"]) {
+      EXPECT_EQ(u["joint"], joint) << "unexplained on a clean joint";
+      if (u["joint"] != joint) continue;
+      found = true;
+      EXPECT_EQ(u["inputs"][0], input + joint);
+    }
     EXPECT_TRUE(found);
     for (const auto& cause : r["causes"])
       if (!cause.contains("superseded_by"))
         for (const auto& j : cause["joints"])
-          for (const auto& w : r["rollout"]["worse_on"]) EXPECT_NE(j, w) << cause["effect"] << " makes the rollouts on " << w << " worse";
+          for (const auto& w : r["rollout"]["worse_on"]) {
+            EXPECT_NE(j, w) << cause["effect"] << " makes the rollouts on " << w << " worse";
+          }
+  }
+}
+
+// A probe over seeds, for the tables of the issue (not run by ctest: --gtest_also_run_disabled_tests).
+// SPML_BEYOND_KIND: a kind of make_draw; SPML_BEYOND_FIRST, SPML_BEYOND_SEEDS: the seeds;
+// SPML_BEYOND_DELAY_MS; SPML_BEYOND_NOISE (torque noise fraction); SPML_BEYOND_BITS.
+TEST(DiagnoseBeyond, DISABLED_SeedTable) {
+  auto env = [](const char* k, const char* d) { const char* v = std::getenv(k); return std::string(v ? v : d); };
+  const std::string kind = env("SPML_BEYOND_KIND", "clean");
+  const int seeds = std::stoi(env("SPML_BEYOND_SEEDS", "5")), first = std::stoi(env("SPML_BEYOND_FIRST", "0"));
+  const auto dir = test::temp_dir("table");
+  for (int s = first; s < first + seeds; ++s) {
+    const Draw d = make_draw(dir, kind, s, std::stod(env("SPML_BEYOND_DELAY_MS", "5")),
+                             noise_level(std::stod(env("SPML_BEYOND_NOISE", "0.01")), std::stoi(env("SPML_BEYOND_BITS", "18"))));
+    const auto r = run_draw(dir, d, s);
+    std::cout << "TABLE " << kind << " seed " << s << " joint j" << d.joint << " other j" << d.other << " (" << d.what << "): delay "
+              << 1e3 * r["delay"]["seconds"].get<double>() << " ± " << 1e3 * r["delay"]["stderr"].get<double>() << " ms named "
+              << r["delay"]["named"] << "; causes " << joined(named(r)) << "\n";
+    for (const auto& cause : r["causes"])
+      std::cout << "   cause " << cause["effect"] << " " << cause["joints"].dump() << " " << cause.value("params", nlohmann::json()).dump()
+                << (cause.contains("superseded_by") ? " superseded" : "") << "\n";
+    for (const auto& u : r["unexplained"])
+      std::cout << "   unexplained " << u["joint"] << " top " << u["inputs"][0] << " share " << u["share"] << " explained_rmse "
+                << std::sqrt(std::pow(u["rmse_test"].get<double>(), 2) - std::pow(u["rmse_test_with_gp"].get<double>(), 2)) << " noise_rmse " << u["noise_rmse"] << "\n";
+    std::cout << "   rollout worse_on " << r["rollout"]["worse_on"].dump() << "\n";
   }
 }
 

@@ -21,6 +21,7 @@
 #include <Eigen/Core>
 #include <chrono>
 #include <deque>
+#include <map>
 #include <sstream>
 #include <functional>
 #include <limits>
@@ -210,6 +211,13 @@ class Diagnosis {
   BlockColumns simulated_columns(const PluginInstance& inst, const SplitData& s) const;
   double stateful_drop(const Candidate& c, const Fit& current, const std::vector<double>& x, Eigen::VectorXd* force = nullptr) const;
   void fit_stateful(Candidate& c, const Fit& current);
+  std::map<std::string, double> static_start(const Candidate& c, const Fit& current) const;
+  double scan_shape_keys(const Candidate& c, const Fit& current, const std::vector<bool>& level, const std::vector<double>& lb,
+                         const std::vector<double>& ub, std::vector<double>& x) const;
+  void polish_stateful(const Candidate& c, const Fit& current, const std::vector<double>& lb, const std::vector<double>& ub, int passes,
+                       std::vector<double>& x) const;
+  int stateful_rival(int accepted, const std::vector<int>& order, const std::vector<int>& chosen, Fit& next, Eigen::VectorXd& next_test);
+  void settle_levels(Candidate& c, const Fit& current, const std::vector<bool>& level, std::vector<double>& x);
   void stateful_errors(Candidate& c, const Fit& current, const std::vector<double>& x);
   void stateful_report(const Candidate& c, double amplitude, nlohmann::json& params, nlohmann::json& se, nlohmann::json& j) const;
   Eigen::VectorXd written_stateful(const SplitData& s, const mjModel* ext) const;

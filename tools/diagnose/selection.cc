@@ -33,7 +33,12 @@ std::vector<int> Diagnosis::kept_effects() const {
 // spans the whole stroke) gets its turn, the larger follows if it adds.
 void Diagnosis::score_candidates(const Fit& current, const std::vector<int>& chosen, const std::set<int>& research, std::vector<int>& order) {
   const double n = static_cast<double>(fit_.y0.size());
-  for (size_t k = 0; k < cands_.size(); ++k) {
+  // #22: the static candidates first, so that a stateful one starts from their fits (stateful_fit.cc).
+  std::vector<size_t> sequence;
+  for (bool stateful : {false, true})
+    for (size_t k = 0; k < cands_.size(); ++k)
+      if (cands_[k].stateful == stateful) sequence.push_back(k);
+  for (size_t k : sequence) {
     if (std::find(chosen.begin(), chosen.end(), static_cast<int>(k)) != chosen.end()) continue;
     Candidate& c = cands_[k];
     if (c.skipped) continue;
@@ -101,6 +106,7 @@ void Diagnosis::select() {
         next_test = std::move(rt);
       }
     }
+    if (accepted >= 0) accepted = stateful_rival(accepted, order, chosen, next, next_test);   // #22 (stateful_fit.cc)
     result_.timings.refits += since(t0);
     if (accepted < 0) break;
     chosen.push_back(accepted);

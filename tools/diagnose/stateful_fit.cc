@@ -17,6 +17,7 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <map>
 
 #include "diagnosis.h"
 #include "spml/parse.h"
@@ -113,6 +114,54 @@ double Diagnosis::stateful_drop(const Candidate& c, const Fit& current, const st
   }
 }
 
+// Start values from the static candidates on the same joint, searched in the same round
+// before it: a key of the stateful plugin named like a parameter or shape key of a static one
+// (LuGre's fc, fs, vs and stribeck's) starts at that candidate's value, fitted on the current
+// residual - the static candidate with the largest drop that shares a key. The scans alone
+// missed the basin of small break-away forces (levels "not determined", `coulomb` named) or
+// settled at a Stribeck speed at the top of its range with fs = fc.
+std::map<std::string, double> Diagnosis::static_start(const Candidate& c, const Fit& current) const {
+  std::map<std::string, double> best;
+  double best_drop = 0;
+  for (const Candidate& s : cands_) {
+    if (s.stateful || s.skipped || !s.searched || s.joint != c.joint || s.gain.rss_drop <= best_drop || s.fit_cols.cols == 0) continue;
+    std::map<std::string, double> values;
+    try {
+      PluginInstance inst(*s.plugin, reg_->model(), {s.joint}, config_of(s, s.shape_values), "diagnose");
+      const Eigen::MatrixXd C = s.fit_cols.dense();
+      const Eigen::MatrixXd Cp = C - current.Q * (current.Q.transpose() * C);
+      const Eigen::VectorXd a = Cp.completeOrthogonalDecomposition().solve(current.residual);
+      const auto names = inst.param_names();
+      for (size_t k = 0; k < names.size() && k < static_cast<size_t>(a.size()); ++k)
+        values[names[k].substr(names[k].rfind('.') + 1)] = a[static_cast<Eigen::Index>(k)];
+      for (size_t k = 0; k < s.shape.size(); ++k) values[s.shape[k]->key] = s.shape_values[k];
+    } catch (const std::exception&) {
+      continue;
+    }
+    bool shares = false;
+    for (const spml_shape_param* sp : c.shape) shares |= values.count(sp->key) > 0;
+    if (shares) best = std::move(values), best_drop = s.gain.rss_drop;
+  }
+  return best;
+}
+
+// Each key that is not a level scanned on 9 points of its (log) range, the others held.
+double Diagnosis::scan_shape_keys(const Candidate& c, const Fit& current, const std::vector<bool>& level, const std::vector<double>& lb,
+                                  const std::vector<double>& ub, std::vector<double>& x) const {
+  double best = stateful_drop(c, current, x);
+  for (size_t k = 0; k < x.size(); ++k) {
+    if (level[k]) continue;
+    std::vector<double> trial = x;
+    double keep = x[k];
+    for (int i = 0; i <= 8; ++i) {
+      trial[k] = lb[k] + (ub[k] - lb[k]) * i / 8.0;
+      if (const double g = stateful_drop(c, current, trial); g > best) best = g, keep = trial[k];
+    }
+    x[k] = keep;
+  }
+  return best;
+}
+
 // The output-error fit of one stateful candidate against the current fit.
 void Diagnosis::fit_stateful(Candidate& c, const Fit& current) {
   if (fit_.split.t.size() != fit_.N) throw PluginError("no time stamps: a stateful effect cannot be integrated along the fit split");
@@ -143,28 +192,49 @@ void Diagnosis::fit_stateful(Candidate& c, const Fit& current) {
       ub[k] = x[k] + std::log(1e3);
       c.shape_range[k] = {best_level * 1e-3, best_level * 1e3};
     }
-  // Each shape key scanned on 9 points of its (log) range, the others held: subplex alone
-  // settled in a poor basin of the Stribeck speed and break-away force.
-  for (size_t k = 0; k < ns; ++k) {
-    if (level[k]) continue;
-    std::vector<double> trial = x;
-    double keep = x[k], best_k = stateful_drop(c, current, x);
-    for (int i = 0; i <= 8; ++i) {
-      trial[k] = lb[k] + (ub[k] - lb[k]) * i / 8.0;
-      if (const double g = stateful_drop(c, current, trial); g > best_k) best_k = g, keep = trial[k];
+  // Two starts: the common level with the shape keys scanned (subplex alone settled in a poor
+  // basin of the Stribeck speed and break-away force), and the static candidates' values
+  // (static_start) with the keys they lack scanned.
+  std::vector<double> from_static = x;
+  double scanned = scan_shape_keys(c, current, level, lb, ub, x);
+  if (const auto start = static_start(c, current); !start.empty()) {
+    double matched = 0;
+    int count = 0;
+    for (size_t k = 0; k < ns; ++k)
+      if (auto it = start.find(c.shape[k]->key); it != start.end() && it->second > 0)
+        from_static[k] = std::clamp(std::log(it->second), lb[k], ub[k]), matched += it->second * level[k], count += level[k];
+    // A level without a positive static value starts at their mean (a static Stribeck fit of
+    // LuGre data gave fs < 0: pre-sliding is no static curve).
+    std::vector<bool> held = level;
+    for (size_t k = 0; k < ns; ++k) {
+      const auto it = start.find(c.shape[k]->key);
+      const bool have = it != start.end() && it->second > 0;
+      if (level[k] && !have && count > 0) from_static[k] = std::clamp(std::log(matched / count), lb[k], ub[k]);
+      held[k] = held[k] || have;
     }
-    x[k] = keep;
+    if (const double g = scan_shape_keys(c, current, held, lb, ub, from_static); g > scanned) x = from_static, scanned = g;
   }
   // No evidence after the scans (a joint without such an effect): not worth the polish.
-  const double n = static_cast<double>(fit_.y0.size()), scanned = stateful_drop(c, current, x);
+  const double n = static_cast<double>(fit_.y0.size());
   const bool polish = std::isfinite(scanned) && scanned > 0 &&
                       delta_bic(n, current.rss, current.rss - scanned, static_cast<double>(ns) + 1, rss_floor(fit_.b)) > opt_.bic_threshold;
+  polish_stateful(c, current, lb, ub, polish ? 2 : 0, x);
+  stateful_errors(c, current, x);
+  c.shape_values.resize(ns);
+  for (size_t k = 0; k < ns; ++k) c.shape_values[k] = std::exp(x[k]);
+  settle_levels(c, current, level, x);
+}
+
+// Subplex on the drop, `passes` times: restarted from its own end point it leaves a valley it
+// had stalled in.
+void Diagnosis::polish_stateful(const Candidate& c, const Fit& current, const std::vector<double>& lb, const std::vector<double>& ub,
+                                int passes, std::vector<double>& x) const {
   struct Ctx {
     const Diagnosis* self;
     const Candidate* c;
     const Fit* current;
   } ctx{this, &c, &current};
-  nlopt::opt local(nlopt::LN_SBPLX, static_cast<unsigned>(ns));
+  nlopt::opt local(nlopt::LN_SBPLX, static_cast<unsigned>(x.size()));
   local.set_lower_bounds(lb);
   local.set_upper_bounds(ub);
   local.set_max_objective([](const std::vector<double>& v, std::vector<double>&, void* data) {
@@ -172,10 +242,9 @@ void Diagnosis::fit_stateful(Candidate& c, const Fit& current) {
     const double g = k->self->stateful_drop(*k->c, *k->current, v);
     return std::isfinite(g) ? g : -1e300;
   }, &ctx);
-  local.set_maxeval(80 * static_cast<int>(ns));
+  local.set_maxeval(80 * static_cast<int>(x.size()));
   local.set_xtol_abs(1e-4);
-  // Two passes: subplex restarted from its own end point leaves a valley it had stalled in.
-  for (int pass = 0; pass < (polish ? 2 : 0); ++pass) {
+  for (int pass = 0; pass < passes; ++pass) {
     double value = 0;
     try {
       local.optimize(x, value);
@@ -183,20 +252,38 @@ void Diagnosis::fit_stateful(Candidate& c, const Fit& current) {
       // a roundoff-limited stop: x holds the best point found
     }
   }
-  stateful_errors(c, current, x);
-  c.shape_values.resize(ns);
-  for (size_t k = 0; k < ns; ++k) c.shape_values[k] = std::exp(x[k]);
-  // A level the data leave free (no influence once the base parameters are refitted: a
-  // viscous sigma2 beside the MJCF's damping) is set to its key's lower bound when that is 0:
-  // no force is declared that the data do not show.
-  for (size_t k = 0; k < ns; ++k)
-    if (level[k] && !std::isfinite(c.stateful_se[k]))
-      for (const spml_config_key* key = c.plugin->config_keys; key && key->name; ++key)
-        if (std::string(key->name) == c.shape[k]->key && key->min == 0) c.shape_values[k] = 0;
+}
+
+// The levels the data do not need are dropped, and a candidate whose levels the data do not
+// determine is not that effect.
+void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vector<bool>& level, std::vector<double>& x) {
+  const size_t ns = x.size();
+  const double n = static_cast<double>(fit_.y0.size());
+  auto zero_allowed = [&](size_t k) {
+    for (const spml_config_key* key = c.plugin->config_keys; key && key->name; ++key)
+      if (std::string(key->name) == c.shape[k]->key) return key->min == 0;
+    return false;
+  };
+  // A level the data leave free (no influence once the base parameters are refitted: a viscous
+  // sigma2 beside the MJCF's damping), or loose (relative error above 50 %) and not needed -
+  // set to 0 it costs less evidence than the threshold - is set to 0 where its key allows: no
+  // force is declared that the data do not show. (A loose sigma2 beside well determined fc
+  // and fs made the whole candidate "not determined" and `coulomb` was named instead.)
+  const double drop = stateful_drop(c, current, x);
+  for (size_t k = 0; k < ns; ++k) {
+    if (!level[k] || !zero_allowed(k) || c.stateful_se[k] <= kNotIdentifiable * c.shape_values[k]) continue;
+    std::vector<double> zeroed = x;
+    zeroed[k] = std::log(1e-300);
+    const double dz = stateful_drop(c, current, zeroed);
+    if (!std::isfinite(dz)) continue;   // the plugin refuses the level at 0 (LuGre's fc)
+    const bool free = !std::isfinite(c.stateful_se[k]);
+    if (free || (delta_bic(n, current.rss - dz, current.rss - drop, 1, rss_floor(fit_.b)) < opt_.bic_threshold))
+      c.shape_values[k] = 0;
+  }
   // The levels must be what the data show: on clean data the fit drives fc and fs to nothing
   // and keeps only the bristle damping, a velocity lag that is not friction (a clean draw of
   // DiagnoseRealistic named stick_slip that way). A stateful candidate whose every level is
-  // undetermined, or with one beyond 50 % relative error, is not that effect.
+  // undetermined, or with one it needs beyond 50 % relative error, is not that effect.
   std::string loose;
   int determined_levels = 0;
   for (size_t k = 0; k < ns; ++k) {
@@ -216,6 +303,37 @@ void Diagnosis::fit_stateful(Candidate& c, const Fit& current) {
   c.fit_cols = simulated_columns(inst, fit_);
   c.gain = gain_of(c.fit_cols, current.Q, current.residual);
   c.searched = true;
+}
+
+// The held-out comparison: a static cause about to join on a joint where a stateful candidate
+// also passes is compared with it on the test split (the joint's outputs, each fitted with the
+// causes already chosen); the stateful one joins instead when its held-out residual sum of
+// squares is lower by min_gain. Ranked by evidence per parameter, the one-parameter `coulomb`
+// always came first and the stateful fit was only ever scored on what Coulomb left.
+int Diagnosis::stateful_rival(int accepted, const std::vector<int>& order, const std::vector<int>& chosen, Fit& next, Eigen::VectorXd& next_test) {
+  const Candidate& a = cands_[static_cast<size_t>(accepted)];
+  if (a.stateful) return accepted;
+  const auto outs = outputs_of(accepted);
+  double best = rss_on(next_test, outs, test_.N);
+  int out = accepted;
+  for (int k : order) {
+    const Candidate& c = cands_[static_cast<size_t>(k)];
+    if (!c.stateful || c.joint != a.joint) continue;
+    std::vector<int> trial = chosen;
+    trial.push_back(k);
+    Fit f = refit(trial, true);
+    const Fit before = refit(chosen, true);
+    if (!refused(k, f.coef.tail(c.fit_cols.cols)).empty() || !evidence_holds(k, before, f)) continue;
+    Eigen::VectorXd rt = residual_on(test_, trial, true, f);
+    const double rss = rss_on(rt, outs, test_.N);
+    if (gains_on_test(best, rss, opt_.min_gain, rss_floor(test_.b))) {
+      best = rss;
+      out = k;
+      next = std::move(f);
+      next_test = std::move(rt);
+    }
+  }
+  return out;
 }
 
 // Gauss-Newton standard errors in the logarithms (central differences of the projected
