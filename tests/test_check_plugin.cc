@@ -70,6 +70,16 @@ TEST(CheckPlugin, RefusesAWriteConfigThatDoesNotRecreateThePlugin) {
   expect_only_failure("force_write_config", "broken_viscous write-config");
 }
 
+// ABI revision 1: a learner flagged PROGRESS whose fraction goes back fails `progress`,
+// naming both fractions; the unbroken fixture (flagged too) passes it.
+TEST(CheckPlugin, RefusesProgressThatGoesBack) {
+  expect_only_failure("learner_progress_back", "SmallRidge progress");
+  EXPECT_TRUE(has(check(broken("learner_progress_back")).output, "the fraction went back from 0.6 to 0.3"));
+  const auto good = check(broken("learner_none"));
+  EXPECT_TRUE(has(good.output, "PASS  SmallRidge  progress: ")) << good.output;
+  EXPECT_TRUE(has(good.output, "never back; predictions identical to fit's")) << good.output;
+}
+
 TEST(CheckPlugin, RefusesALearnerThatWritesIntoItsInputs) {
   expect_only_failure("learner_mutate", "SmallRidge inputs-untouched");
   EXPECT_TRUE(has(check(broken("learner_mutate")).output, "fit wrote into its inputs: x[0] was "));

@@ -9,6 +9,8 @@
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <random>
+#include <regex>
+#include <algorithm>
 
 #include "spml/envs/mujoco_model.h"
 #include "spml/envs/parametric_model.h"
@@ -878,3 +880,157 @@ TEST(ForcePlugins, UnnamedAndFreeJointsAreNamedByIndexAndType) {
     EXPECT_NE(std::string(err).find(message), std::string::npos) << err;
   }
 }
+
+// ABI revision 1: progress inside a fit (learner.h, SPML_LEARNER_PROGRESS).
+namespace {
+
+struct Heard {
+  std::vector<double> fractions;
+  std::vector<std::string> stages;
+  ProgressFn sink() {
+    return [this](double f, const char* stage) {
+      fractions.push_back(f);
+      stages.push_back(stage);
+    };
+  }
+};
+
+// Toy's train split with its regressor, as the bench hands it to a learner.
+struct ToyFit {
+  RowMatrix X, Y, phi;
+  LearnerModel model;
+  ToyFit() {
+    const Dataset ds = read_dataset(scenario_file("toy"));
+    const Split& train = ds.get("train");
+    auto m = make_parametric_model(ds, train);
+    X = train.X;
+    Y = train.Y;
+    phi = m->stacked(train.X);
+    model = LearnerModel{m->param_names, m->prior, m->truth};
+  }
+  LearnerPrediction fit_predict(const std::string& name, LearnerConfig config) const {
+    auto l = registry().create(name);
+    l->fit(LearnerData{&X, &Y, &phi, 1}, model, config);
+    return l->predict(LearnerData{&X, nullptr, &phi, 1});
+  }
+};
+
+// Every fraction within [0, 1] and none smaller than the one before; "" when so.
+std::string monotone_problem(const std::vector<double>& f) {
+  for (size_t i = 0; i < f.size(); ++i) {
+    if (!(f[i] >= 0 && f[i] <= 1)) return "fraction " + std::to_string(f[i]) + " at report " + std::to_string(i);
+    if (i > 0 && f[i] < f[i - 1])
+      return "went back from " + std::to_string(f[i - 1]) + " to " + std::to_string(f[i]) + " at report " + std::to_string(i);
+  }
+  return "";
+}
+
+// The GP reports after every likelihood evaluation: many fractions, never back, ending at 1;
+// the staged fit (subset_rows below the 400 rows) and the compositions likewise.
+TEST(LearnerProgress, GpFitReportsNonDecreasingFractionsEndingAtOne) {
+  const ToyFit toy;
+  ASSERT_TRUE(registry().plugin("GP")->flags & SPML_LEARNER_PROGRESS);
+  struct Case {
+    std::string learner;
+    std::vector<std::pair<std::string, std::string>> values;
+    std::string stage;   // a stage text that must be heard
+  };
+  const std::vector<Case> cases = {{"GP", {}, "likelihood evaluations"},
+                                   {"GP", {{"subset_rows", "100"}}, "subset, then all rows"},
+                                   {"SPGP", {}, "likelihood evaluations"},
+                                   {"SPGP-Sparse", {{"inducing", "50"}, {"subset_rows", "100"}}, "subset fit"},
+                                   {"LLS-GP", {}, "GP: likelihood evaluations"},
+                                   {"it-LLS-GP", {{"iterations", "2"}}, "residual part fitted"}};
+  for (const auto& c : cases) {
+    SCOPED_TRACE(c.learner + (c.values.empty() ? "" : " " + c.values.front().first));
+    Heard heard;
+    LearnerConfig config;
+    config.values = c.values;
+    config.progress = heard.sink();
+    toy.fit_predict(c.learner, config);
+    ASSERT_GE(heard.fractions.size(), 10u);   // one per evaluation, not just start and end
+    EXPECT_EQ(monotone_problem(heard.fractions), "");
+    EXPECT_EQ(heard.fractions.front(), 0.0);
+    EXPECT_EQ(heard.fractions.back(), 1.0);
+    // Something between: a fit that jumped from 0 to 1 would foretell nothing.
+    EXPECT_TRUE(std::any_of(heard.fractions.begin(), heard.fractions.end(), [](double f) { return f > 0.05 && f < 0.95; }));
+    EXPECT_TRUE(std::any_of(heard.stages.begin(), heard.stages.end(),
+                            [&](const std::string& s) { return s.find(c.stage) != std::string::npos; }));
+  }
+}
+
+// A library built before revision 1 (entries end at destroy, no flag) loads, fits and predicts
+// with progress asked for; it reports nothing, and a composition with it still reports its
+// stages' ends.
+TEST(LearnerProgress, ALibraryWithoutTheFlagStillLoadsAndFits) {
+  LearnerRegistry reg;
+  reg.add_default_path();
+  reg.add(std::string(SPML_TEST_LEARNER_DIR) + "/revision0_learner.so");
+  ASSERT_NE(reg.plugin("OldMean2"), nullptr);
+  EXPECT_FALSE(reg.plugin("OldMean2")->flags & SPML_LEARNER_PROGRESS);
+  const ToyFit toy;
+  for (const std::string name : {"OldMean", "OldMean2"}) {
+    Heard heard;
+    LearnerConfig config;
+    config.progress = heard.sink();
+    auto l = reg.create(name);
+    l->fit(LearnerData{&toy.X, &toy.Y, &toy.phi, 1}, toy.model, config);
+    const LearnerPrediction p = l->predict(LearnerData{&toy.X, nullptr, &toy.phi, 1});
+    EXPECT_NEAR(p.mean(7, 0), toy.Y.col(0).mean(), 1e-12) << name;
+    EXPECT_TRUE(heard.fractions.empty()) << name;
+  }
+  Heard heard;
+  LearnerConfig config;
+  config.progress = heard.sink();
+  auto composed = reg.create("LLS-OldMean2");
+  composed->fit(LearnerData{&toy.X, &toy.Y, &toy.phi, 1}, toy.model, config);
+  EXPECT_EQ(heard.fractions, (std::vector<double>{0.5, 1.0}));
+}
+
+// Reporting changes nothing: fit_progress and fit predict bit for bit the same for one seed
+// (the GP; BNN and BaMbANN, which draw random numbers, where the torch library is built).
+TEST(LearnerProgress, FitProgressAndFitPredictIdentically) {
+  const ToyFit toy;
+  std::vector<std::pair<std::string, std::vector<std::pair<std::string, std::string>>>> learners = {
+      {"SPGP", {}}, {"GP", {{"subset_rows", "100"}}}};
+  for (const char* torch : {"BNN", "BaMbANN"})
+    if (registry().plugin(torch)) learners.push_back({torch, {{"steps", "150"}}});
+  for (const auto& [name, values] : learners) {
+    SCOPED_TRACE(name);
+    LearnerConfig quiet;
+    quiet.values = values;
+    quiet.seed = 7;
+    LearnerConfig heard_config = quiet;
+    Heard heard;
+    heard_config.progress = heard.sink();
+    const LearnerPrediction a = toy.fit_predict(name, quiet), b = toy.fit_predict(name, heard_config);
+    EXPECT_GE(heard.fractions.size(), 3u);
+    EXPECT_EQ(monotone_problem(heard.fractions), "");
+    EXPECT_TRUE((a.mean.array() == b.mean.array()).all());
+    EXPECT_TRUE((a.var.array() == b.var.array()).all());
+  }
+}
+
+// bench's stderr: during a fit longer than --heartbeat, lines with the fraction done, the
+// fit's ETA (elapsed / fraction) and the run's. A heartbeat of 5 ms makes the Toy SPGP fit
+// (two L-BFGS stages, some 0.1-1 s) "long"; --quiet prints none of it.
+TEST(Bench, ProgressSaysFractionAndEtaDuringALongFit) {
+  const fs::path dir = test::temp_dir("bench-heartbeat");
+  const std::string bench = test::spml_bin() + " bench --data " + scenario_file("toy") + " --learners LLS,SPGP --reps 1 --heartbeat 0.005 --out ";
+  // stderr alone (the closing line is stdout's).
+  const auto r = test::run("( " + bench + (dir / "a").string() + " 2>&1 >/dev/null )");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const std::regex beat(R"(\[2/2\] SPGP rep 1/1: ([0-9.]+) % \(likelihood evaluations\), \d+ s elapsed, ETA \d+ s for this fit; run ETA \d+ s)");
+  std::vector<double> percents;
+  for (auto it = std::sregex_iterator(r.output.begin(), r.output.end(), beat); it != std::sregex_iterator(); ++it)
+    percents.push_back(std::stod((*it)[1].str()));
+  ASSERT_FALSE(percents.empty()) << r.output;
+  EXPECT_TRUE(std::is_sorted(percents.begin(), percents.end())) << r.output;
+  EXPECT_LE(percents.back(), 100.0);
+  const auto q = test::run("( " + bench + (dir / "b").string() + " --quiet 2>&1 >/dev/null )");
+  ASSERT_EQ(q.exit_code, 0) << q.output;
+  EXPECT_EQ(q.output.find(" % ("), std::string::npos) << q.output;
+  EXPECT_EQ(q.output.find("ETA"), std::string::npos) << q.output;
+}
+
+}  // namespace

@@ -2,6 +2,7 @@
 // one coefficient vector) per output; otherwise all outputs share one kernel and theta.
 // "SPGP-Sparse" takes its kernel from the exact fit on a strided subset and predicts with
 // the variational sparse posterior over every row.
+#include <algorithm>
 #include <cmath>
 #include <memory>
 #include <stdexcept>
@@ -45,6 +46,8 @@ class GaussianProcess : public Learner {
     outputs_ = O;
     const int groups = kSeparate ? static_cast<int>(O) : 1;
     for (int g = 0; g < groups; ++g) {
+      // Each output group (one for a shared kernel) is an equal share of the fit's progress.
+      const double from = static_cast<double>(g) / groups, to = static_cast<double>(g + 1) / groups;
       Eigen::MatrixXd Y = kSeparate ? Eigen::MatrixXd(d.Y.col(g)) : Eigen::MatrixXd(d.Y);
       // Work on targets scaled to unit RMS, so that "everything starts at 1.0" means
       // sf2 = sn2 = mean(y^2) in data units. Raw 1.0 against torques of hundreds of Nm
@@ -65,6 +68,12 @@ class GaussianProcess : public Learner {
         gp::Likelihood sub = lik->subset(gp::evenly_spaced_rows(n, options.subset_rows));
         gp::FitOptions exact = options;
         exact.subset_rows = 0;
+        // Progress: the exact subset fit against the sparse posterior's O(n m^2) pass over all
+        // rows (a few n m^2 flops per output), both in gp::fit_work's units.
+        const double m = std::min<double>(inducing, static_cast<double>(n));
+        const double fit_work = gp::fit_work(sub.X().rows(), sub.inputs(), sub.params(), exact);
+        const double split = fit_work / (fit_work + 3.0 * static_cast<double>(n) * m * m * static_cast<double>(sub.outputs()));
+        exact.progress = progress_part(progress, from, from + split * (to - from), "subset fit");
         const gp::FitResult r = gp::fit(sub, first, exact);
         for (const auto& w : r.warnings) add_note("subset fit: " + w);
         const std::vector<Eigen::Index> z = gp::evenly_spaced_rows(n, inducing);
@@ -73,13 +82,16 @@ class GaussianProcess : public Learner {
         sparse_.emplace_back(lik->X(), lik->Y(), lik->phi(), std::move(Z), r.hyper);
         theta_.push_back(sparse_.back().theta() * scale);
       } else {
-        gp::FitResult r = gp::fit(*lik, first, options);
+        gp::FitOptions mine = options;
+        mine.progress = progress_part(progress, from, to, staged_text(n, options));
+        gp::FitResult r = gp::fit(*lik, first, mine);
         for (const auto& w : r.warnings) add_note((kSeparate ? "output " + std::to_string(g) + ": " : std::string()) + w);
         posteriors_.emplace_back(*lik, r.hyper);
         if (posteriors_.back().jitter() > 0) add_note("posterior Cholesky needed jitter");
         theta_.push_back(r.hyper.theta * scale);
       }
       scale_.push_back(scale);
+      progress(to, "posterior");
     }
   }
 
@@ -124,6 +136,11 @@ class GaussianProcess : public Learner {
     return {};
   }
   void add_note(const std::string& s) { notes += (notes.empty() ? "" : "; ") + s; }
+  // The stage text of a progress report (static: the ABI passes it as a plain C string).
+  static const char* staged_text(Eigen::Index n, const gp::FitOptions& o) {
+    return o.subset_rows > 0 && static_cast<double>(n) > 1.5 * o.subset_rows ? "likelihood evaluations (subset, then all rows)"
+                                                                               : "likelihood evaluations";
+  }
 
   std::vector<gp::Posterior> posteriors_;
   std::vector<gp::SparsePosterior> sparse_;
@@ -132,7 +149,7 @@ class GaussianProcess : public Learner {
   Eigen::Index outputs_ = 0;
 };
 
-constexpr uint32_t kGpFlags = SPML_LEARNER_VARIANCE | SPML_LEARNER_DETERMINISTIC;
+constexpr uint32_t kGpFlags = SPML_LEARNER_VARIANCE | SPML_LEARNER_DETERMINISTIC | SPML_LEARNER_PROGRESS;
 constexpr spml_config_key kGpKeys[] = {
     {"max_evals", SPML_VALUE_INTEGER, 1, 1e9, "1000", "most likelihood evaluations of L-BFGS"},
     {"noise_floor", SPML_VALUE_NUMBER, 1e-300, HUGE_VAL, "1e-6", "lower bound of the noise variance (scaled units)"},

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <functional>
 #include <limits>
 #include <nlopt.hpp>
 #include <sstream>
@@ -232,6 +233,7 @@ const char* nlopt_reason(nlopt::result r) {
 // The optimiser works on u with theta = s o u, s_j = 1 / rms(phi column j): it puts the
 // mean coefficients on the scale of the kernel's log parameters, which L-BFGS needs.
 struct Problem {
+  std::function<void(int)> evaluated;   // after each evaluation, with the count so far; may be empty
   Likelihood* lik;
   Eigen::VectorXd scale;   // per packed parameter: 1 for kernel terms, s_j for theta
   bool learn_mean;
@@ -273,16 +275,44 @@ double objective(unsigned n, const double* x, double* grad, void* data) {
     pr->best = v;
     pr->best_x = u;
   }
+  if (pr->evaluated) pr->evaluated(pr->evaluations);
   return v;
 }
 
-FitResult fit_once(Likelihood& lik, const Hyper& start, const FitOptions& options) {
+// Evaluations a stage run to convergence is expected to take (FitOptions' fit_work).
+double expected_evaluations(int optimised, int max_evals) {
+  return std::min<double>(max_evals, 4.0 * optimised + 10.0);
+}
+
+// How much of a stage `done` evaluations are, for `expected` evaluations: linear up to 95 % at
+// the expected count, then creeping towards 1 (a stage may run past the guess; the fraction
+// must still grow and stay below the stage's end, which comes when the stage returns).
+double stage_fraction(int done, double expected) {
+  const double k = done;
+  if (k <= expected) return 0.95 * k / expected;
+  return 0.95 + 0.05 * (1.0 - std::exp(-(k - expected) / expected));
+}
+
+// Progress of one stage: its share [from, from + share] of the whole fit.
+struct Stage {
+  const std::function<void(double)>* report = nullptr;
+  double from = 0, share = 0, expected = 1;
+  void operator()(int done) const {
+    if (report && *report) (*report)(from + share * stage_fraction(done, expected));
+  }
+  void end() const {
+    if (report && *report) (*report)(from + share);
+  }
+};
+
+FitResult fit_once(Likelihood& lik, const Hyper& start, const FitOptions& options, const Stage& stage = {}) {
   const int d = lik.inputs(), M = lik.params();
   Hyper h0 = start;
   if (h0.theta.size() != M) throw std::invalid_argument("GP fit: start theta has the wrong size");
   h0.noise_var = std::max(h0.noise_var, options.noise_floor);
 
   Problem pr;
+  if (stage.report && *stage.report) pr.evaluated = stage;
   pr.lik = &lik;
   pr.learn_mean = options.learn_mean && M > 0;
   pr.fixed = pack(h0);
@@ -358,6 +388,7 @@ FitResult fit_once(Likelihood& lik, const Hyper& start, const FitOptions& option
     msg << "Cholesky needed jitter up to " << lik.max_jitter();
     res.warnings.push_back(msg.str());
   }
+  stage.end();
   return res;
 }
 
@@ -365,32 +396,78 @@ FitResult fit_once(Likelihood& lik, const Hyper& start, const FitOptions& option
 // fit from there. From "everything at 1.0" the LML's gradient in theta dwarfs the kernel's,
 // and a joint L-BFGS moves theta to absorb what the unfitted kernel cannot, into a worse
 // basin (SimDyn-Ll, 1000 rows: LML 1501 against 2603 this way; test_extrap 47 Nm against 16).
-Hyper kernel_first(Likelihood& lik, const Hyper& start, const FitOptions& options) {
-  if (!options.learn_mean || !options.kernel_first || lik.params() == 0) return start;
+bool has_kernel_first(int params, const FitOptions& options) {
+  return options.learn_mean && options.kernel_first && params > 0;
+}
+
+Hyper kernel_first(Likelihood& lik, const Hyper& start, const FitOptions& options, const Stage& stage) {
+  if (!has_kernel_first(lik.params(), options)) return start;
   FitOptions kernel = options;
   kernel.learn_mean = false;
   try {
-    return fit_once(lik, start, kernel).hyper;
+    return fit_once(lik, start, kernel, stage).hyper;
   } catch (const std::exception&) {
+    stage.end();
     return start;   // the joint fit reports its own failure
   }
 }
 
+bool staged(Eigen::Index n, const FitOptions& options) {
+  return options.subset_rows > 0 && static_cast<double>(n) > 1.5 * options.subset_rows;
+}
+
+// The stages of fit(), as work (fit_work's units) each: kernel-first, joint (on the subset when
+// staged), the last stage on all rows (staged only), the posterior.
+struct Plan {
+  double kernel = 0, joint = 0, last = 0, posterior = 0;
+  double kernel_evals = 1, joint_evals = 1, last_evals = 1;
+  double total() const { return kernel + joint + last + posterior; }
+};
+
+Plan plan_of(Eigen::Index n, int inputs, int params, const FitOptions& options) {
+  Plan p;
+  const bool two = staged(n, options);
+  const double rows = two ? static_cast<double>(evenly_spaced_rows(n, options.subset_rows).size()) : static_cast<double>(n);
+  const double all = static_cast<double>(n) * n * n, cube = rows * rows * rows;
+  const int kernel_terms = inputs + 2, learnt = kernel_terms + (options.learn_mean ? params : 0);
+  if (has_kernel_first(params, options)) {
+    p.kernel_evals = expected_evaluations(kernel_terms, options.max_evals);
+    p.kernel = p.kernel_evals * cube;
+  }
+  p.joint_evals = expected_evaluations(learnt, options.max_evals);
+  p.joint = p.joint_evals * cube;
+  if (two) {
+    p.last_evals = std::max(1, options.final_evals);
+    p.last = p.last_evals * all;
+  }
+  p.posterior = 0.5 * all;
+  return p;
+}
+
 }  // namespace
+
+double fit_work(Eigen::Index rows, int inputs, int params, const FitOptions& options) {
+  return plan_of(rows, inputs, params, options).total();
+}
 
 FitResult fit(Likelihood& lik, const Hyper& start, const FitOptions& options) {
   const Eigen::Index n = lik.X().rows();
-  if (options.subset_rows <= 0 || static_cast<double>(n) <= 1.5 * options.subset_rows)
-    return fit_once(lik, kernel_first(lik, start, options), options);
+  const Plan plan = plan_of(n, lik.inputs(), lik.params(), options);
+  const double total = plan.total();
+  const std::function<void(double)>* report = options.progress ? &options.progress : nullptr;
+  const Stage kernel_stage{report, 0.0, plan.kernel / total, plan.kernel_evals};
+  const Stage joint_stage{report, plan.kernel / total, plan.joint / total, plan.joint_evals};
+  if (!staged(n, options)) return fit_once(lik, kernel_first(lik, start, options, kernel_stage), options, joint_stage);
   // Evenly strided rows keep the whole trajectory's coverage at a fraction of the density.
   Likelihood sub = lik.subset(evenly_spaced_rows(n, options.subset_rows));
   FitOptions first = options;
   first.subset_rows = 0;
-  const FitResult coarse = fit_once(sub, kernel_first(sub, start, first), first);
+  const FitResult coarse = fit_once(sub, kernel_first(sub, start, first, kernel_stage), first, joint_stage);
   FitOptions last = options;
   last.subset_rows = 0;
   last.max_evals = options.final_evals;
-  FitResult res = fit_once(lik, coarse.hyper, last);
+  const Stage last_stage{report, (plan.kernel + plan.joint) / total, plan.last / total, plan.last_evals};
+  FitResult res = fit_once(lik, coarse.hyper, last, last_stage);
   res.subset_evaluations = coarse.evaluations;
   static const bool trace = std::getenv("SPML_GP_TRACE") != nullptr;
   if (trace)

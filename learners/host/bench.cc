@@ -102,6 +102,25 @@ class Progress {
     auto it = learners_.find(name);
     return it == learners_.end() || it->second.fits == 0 ? 0.0 : it->second.seconds / it->second.fits;
   }
+  // The run's ETA while a unit of `name` is fitting, foreseen from its progress to take `unit`
+  // seconds in all, `left` of them still to come: its learner's later units count at their
+  // mean so far or, before the first has finished, at `unit`; the other learners as done().
+  // Sets *guessed when some learner is not timed yet (counted as the slowest so far).
+  double eta_during(const std::string& name, double unit, double left, bool* guessed) const {
+    double slowest = unit, eta = left;
+    for (const auto& [n, l] : learners_)
+      if (l.fits > 0) slowest = std::max(slowest, l.seconds / l.fits);
+    *guessed = false;
+    for (const auto& [n, l] : learners_) {
+      if (n == name) {
+        eta += (l.left - 1) * (l.fits > 0 ? l.seconds / l.fits : unit);
+        continue;
+      }
+      eta += l.left * (l.fits > 0 ? l.seconds / l.fits : slowest);
+      *guessed |= l.left > 0 && l.fits == 0;
+    }
+    return eta;
+  }
 
  private:
   struct Learner {
@@ -120,19 +139,58 @@ class Progress {
   std::chrono::steady_clock::time_point start_;
 };
 
+// What a fit reports while it runs (LearnerConfig::progress), for the heartbeat's thread.
+class FitProgress {
+ public:
+  void set(double fraction, const char* stage) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    fraction_ = fraction;
+    stage_ = stage ? stage : "";
+  }
+  // false until the fit has reported.
+  bool get(double* fraction, std::string* stage) const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    *fraction = fraction_;
+    *stage = stage_;
+    return fraction_ >= 0;
+  }
+
+ private:
+  mutable std::mutex mutex_;
+  double fraction_ = -1;
+  std::string stage_;
+};
+
 // A line every `every` seconds while one unit is being fitted, so a long fit (a GP on
-// thousands of rows) is not silent; stops when it goes out of scope.
+// thousands of rows) is not silent; stops when it goes out of scope. When the learner reports
+// its progress, the line gives the fraction, the fit's ETA from elapsed / fraction and the
+// run's ETA with this fit foreseen so (`run` is read only: the main thread waits in the fit).
 class Heartbeat {
  public:
-  Heartbeat(double every, std::string tag, double expected, std::function<void(const std::string&)> log)
-      : thread_([=] {
+  Heartbeat(double every, std::string tag, std::string name, const Progress& run, const FitProgress& fit,
+            std::function<void(const std::string&)> log)
+      : thread_([=, &run, &fit] {
           if (!(every > 0) || !log) return;
+          const double expected = run.expected(name);
           const auto start = std::chrono::steady_clock::now();
           std::unique_lock<std::mutex> lock(mutex_);
           while (!cv_.wait_for(lock, std::chrono::duration<double>(every), [this] { return stop_; })) {
             const double t = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-            log(tag + ": still fitting, " + clock_text(t) +
-                (expected > 0 ? " (its earlier units took " + clock_text(expected) + " each)" : ""));
+            double f = 0;
+            std::string stage;
+            // Below 0.5 % a projection multiplies the noise of the first moments by 200 or more.
+            if (fit.get(&f, &stage) && f >= 0.005) {
+              const double total = t / f, left = std::max(0.0, total - t);
+              bool guessed = false;
+              const double eta = run.eta_during(name, total, left, &guessed);
+              std::ostringstream pct;
+              pct << std::fixed << std::setprecision(f < 0.1 ? 1 : 0) << 100 * f << " %";
+              log(tag + ": " + pct.str() + (stage.empty() ? "" : " (" + stage + ")") + ", " + clock_text(t) +
+                  " elapsed, ETA " + clock_text(left) + " for this fit; run ETA " + (guessed ? "~" : "") + clock_text(eta));
+            } else {
+              log(tag + ": still fitting, " + clock_text(t) +
+                  (expected > 0 ? " (its earlier units took " + clock_text(expected) + " each)" : ""));
+            }
           }
         }) {}
   ~Heartbeat() {
@@ -663,8 +721,12 @@ BenchReport run_bench(const LearnerRegistry& registry, const BenchOptions& o, bo
       try {
         std::string summary;
         {
-          const Heartbeat beat(o.heartbeat_seconds, tag.str(), progress.expected(name), o.log);
+          FitProgress fit_progress;
+          if (o.log && o.heartbeat_seconds > 0)
+            config.progress = [&fit_progress](double f, const char* stage) { fit_progress.set(f, stage); };
+          const Heartbeat beat(o.heartbeat_seconds, tag.str(), name, progress, fit_progress, o.log);
           units.push_back(fit_unit(*learner, parts, lm, config, key, path, &summary));
+          config.progress = nullptr;   // it points at fit_progress, which ends here
         }
         ++report.units_run;
         log(tag.str() + ": " + summary + (learner->notes().empty() ? "" : "  [" + learner->notes() + "]") +

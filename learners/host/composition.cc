@@ -1,5 +1,7 @@
 #include "spml/learners/composition.h"
 
+#include <algorithm>
+
 #include "spml/parse.h"
 
 namespace spml {
@@ -14,7 +16,8 @@ class Composition : public Learner {
     const std::uint32_t fa = a_->flags(), fb = b_->flags();
     constexpr std::uint32_t kEither =
         SPML_LEARNER_USES_MODEL | SPML_LEARNER_VARIANCE | SPML_LEARNER_NEEDS_PRIOR | SPML_LEARNER_NEEDS_TRUTH;
-    return ((fa | fb) & kEither) | (fa & fb & SPML_LEARNER_DETERMINISTIC);
+    // Progress always: the stages' ends are known even when neither part reports inside a fit.
+    return ((fa | fb) & kEither) | (fa & fb & SPML_LEARNER_DETERMINISTIC) | SPML_LEARNER_PROGRESS;
   }
   void fit(const LearnerData& train, const LearnerModel& model, const LearnerConfig& config) override {
     int iterations = iterative_ ? kDefaultIterations : 1;
@@ -27,13 +30,34 @@ class Composition : public Learner {
     const RowMatrix& y = *train.Y;
     LearnerData part = train;
     RowMatrix target = y, residual;
+    // Progress: fit k of the n = 2 * iterations fits spans [k/n, (k+1)/n]; a part that reports
+    // its own progress moves within its span, one that does not jumps to its span's end.
+    const int stages = 2 * iterations;
+    double reached = 0;   // the parts' fractions are each monotone; the scaled sequence is too
+    auto stage_config = [&](int k, Learner& part_learner) {
+      LearnerConfig c = config;
+      c.progress = nullptr;
+      if (config.progress && part_learner.reports_progress())
+        c.progress = [&, k](double f, const char* stage) {
+          reached = std::max(reached, (k + std::min(1.0, std::max(0.0, f))) / stages);
+          const std::string text = part_learner.name() + ": " + stage;
+          config.progress(reached, text.c_str());
+        };
+      return c;
+    };
+    auto stage_done = [&](int k) {
+      reached = std::max(reached, static_cast<double>(k + 1) / stages);
+      if (config.progress) config.progress(reached, k % 2 == 0 ? "first part fitted" : "residual part fitted");
+    };
     for (int it = 0; it < iterations; ++it) {
       if (it > 0) target = y - b_->predict(inputs_of(train)).mean;   // eq. 6: A on what B leaves
       part.Y = &target;
-      a_->fit(part, model, config);
+      a_->fit(part, model, stage_config(2 * it, *a_));
+      stage_done(2 * it);
       residual = y - a_->predict(inputs_of(train)).mean;               // eq. 4: B on what A leaves
       part.Y = &residual;
-      b_->fit(part, model, config);
+      b_->fit(part, model, stage_config(2 * it + 1, *b_));
+      stage_done(2 * it + 1);
     }
   }
   LearnerPrediction predict(const LearnerData& query) const override {

@@ -46,7 +46,12 @@ class PluginLearner : public Learner {
                          model.truth.size() == M && M > 0 ? model.truth.data() : nullptr};
     spml_learner_data d = to_c(train);
     char error[1024] = "";
-    state_ = api_->fit(&d, &m, &c, error, sizeof error);
+    // Revision 1: fit_progress only for an entry flagged PROGRESS (an older entry ends at destroy).
+    if (config.progress && (api_->flags & SPML_LEARNER_PROGRESS))
+      state_ = api_->fit_progress(&d, &m, &c, &PluginLearner::forward_progress, const_cast<ProgressFn*>(&config.progress),
+                                  error, sizeof error);
+    else
+      state_ = api_->fit(&d, &m, &c, error, sizeof error);
     if (!state_) throw LearnerError(std::string(api_->name) + ": fit failed: " + (error[0] ? error : "no message"));
   }
 
@@ -79,6 +84,13 @@ class PluginLearner : public Learner {
     if (state_) api_->destroy(state_);
     state_ = nullptr;
   }
+  // The C callback handed to fit_progress: nothing may unwind into the plugin.
+  static void forward_progress(void* context, double fraction, const char* stage) {
+    try {
+      (*static_cast<ProgressFn*>(context))(fraction, stage ? stage : "");
+    } catch (...) {
+    }
+  }
   static spml_learner_data to_c(const LearnerData& in) {
     spml_learner_data d{};
     d.rows = in.X->rows();
@@ -103,6 +115,8 @@ const PluginKind& learner_plugin_kind() {
 
 std::string learner_problem(const spml_learner& l) {
   if (!l.fit || !l.predict || !l.destroy) return "entry lacks fit, predict or destroy";
+  // Read past destroy only when the flag says the entry is of revision 1 or later.
+  if ((l.flags & SPML_LEARNER_PROGRESS) && !l.fit_progress) return "entry is flagged PROGRESS but lacks fit_progress";
   return "";
 }
 

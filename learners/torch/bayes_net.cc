@@ -284,7 +284,8 @@ BayesNet::BayesNet(BayesNetOptions options) : impl_(std::make_unique<Impl>()) { 
 BayesNet::~BayesNet() = default;
 
 void BayesNet::fit(const Eigen::Ref<const RowMatrix>& X, const Eigen::Ref<const RowMatrix>& Y,
-                   const Eigen::Ref<const RowMatrix>& phi, const Eigen::VectorXd& theta_prior) {
+                   const Eigen::Ref<const RowMatrix>& phi, const Eigen::VectorXd& theta_prior,
+                   const std::function<void(double, const char*)>& progress) {
   Impl& m = *impl_;
   const BayesNetOptions& o = m.opt;
   const Eigen::Index n = X.rows();
@@ -379,6 +380,16 @@ void BayesNet::fit(const Eigen::Ref<const RowMatrix>& X, const Eigen::Ref<const 
   // The step size decays along a half cosine to zero at the end: a constant step leaves Adam
   // jittering around the optimum, which the learned noise then mistakes for observation noise.
   const double total_steps = static_cast<double>(epochs) * static_cast<double>(per_epoch);
+  // Progress: each training row costs a forward and a backward pass (about 3 forwards); the
+  // passes after training predict every training row once per weight draw (forward only):
+  // the noise recalibration and theta's identification, one pass each when they run.
+  const double passes = (o.obs_var <= 0 ? 1.0 : 0.0) + (o.model_path ? 1.0 : 0.0);
+  const double train_work = 3.0 * total_steps * static_cast<double>(batch);
+  const double after_work = passes * std::max(1, o.samples) * rows;
+  const double train_share = train_work / (train_work + after_work);
+  auto report = [&](double fraction, const char* stage) {
+    if (progress) progress(fraction, stage);
+  };
   int64_t step = 0;
   for (int e = 0; e < epochs; ++e) {
     const Tensor order = torch::randperm(n, gen, torch::TensorOptions().dtype(torch::kLong));
@@ -404,6 +415,7 @@ void BayesNet::fit(const Eigen::Ref<const RowMatrix>& X, const Eigen::Ref<const 
     if (!std::isfinite(m.final_loss))
       throw std::runtime_error("training diverged at epoch " + std::to_string(e + 1) +
                                " (loss not finite); try a smaller learning_rate");
+    report(train_share * (e + 1) / epochs, "epochs");
   }
   m.epochs_run = epochs;
 
@@ -426,6 +438,7 @@ void BayesNet::fit(const Eigen::Ref<const RowMatrix>& X, const Eigen::Ref<const 
       calibrated[j] = std::max(o.noise_floor, (residual - model) / static_cast<double>(n));
     }
     m.fixed_noise = torch::from_blob(calibrated.data(), {m.outputs}, torch::kFloat64).to(torch::kFloat32).clone();
+    report(train_share + (1.0 - train_share) / passes, "noise recalibration");
   }
   if (o.model_path) m.identify_theta(x, phi_t);
 }

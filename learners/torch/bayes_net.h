@@ -8,6 +8,7 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <memory>
 #include <string>
@@ -54,9 +55,12 @@ class BayesNet {
   BayesNet(const BayesNet&) = delete;
   BayesNet& operator=(const BayesNet&) = delete;
 
-  // theta_prior: the model path's prior mean and starting point (params values).
+  // theta_prior: the model path's prior mean and starting point (params values). progress
+  // (may be empty) hears the fraction of the work done after every epoch and after each pass
+  // over the training rows that follows training; the fit is the same with or without it.
   void fit(const Eigen::Ref<const RowMatrix>& X, const Eigen::Ref<const RowMatrix>& Y,
-           const Eigen::Ref<const RowMatrix>& phi, const Eigen::VectorXd& theta_prior);
+           const Eigen::Ref<const RowMatrix>& phi, const Eigen::VectorXd& theta_prior,
+           const std::function<void(double, const char*)>& progress = {});
   // mean and var: rows x outputs, row-major; var (may be null) includes the observation noise.
   void predict(const Eigen::Ref<const RowMatrix>& X, const Eigen::Ref<const RowMatrix>& phi, double* mean,
                double* var) const;

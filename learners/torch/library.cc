@@ -25,7 +25,7 @@ class BayesLearner : public adapter::Learner {
     }
     const BayesNetOptions options = bayes_net_options(config.values, d.outputs, kModelPath, config.seed);
     net_ = std::make_unique<BayesNet>(options);
-    net_->fit(d.X, d.Y, d.phi, prior);
+    net_->fit(d.X, d.Y, d.phi, prior, [this](double f, const char* stage) { progress(f, stage); });
     // notes are warnings (spml compare marks them): only what a user should look at.
     const Eigen::VectorXd noise = net_->noise_var();
     for (Eigen::Index o = 0; o < noise.size(); ++o)
@@ -48,10 +48,10 @@ const std::vector<spml_learner>& all() {
   static const std::vector<spml_learner> list{
       adapter::make_learner<BayesLearner<false>>(
           "BNN", "Bayesian neural network (Bayes by backprop), 3 ELU layers, no model",
-          SPML_LEARNER_VARIANCE | SPML_LEARNER_NONPARAMETRIC, bayes_net_keys(false)),
+          SPML_LEARNER_VARIANCE | SPML_LEARNER_NONPARAMETRIC | SPML_LEARNER_PROGRESS, bayes_net_keys(false)),
       adapter::make_learner<BayesLearner<true>>(
           "BaMbANN", "BNN plus a Bayesian model layer phi(x).theta, trained jointly",
-          SPML_LEARNER_VARIANCE | SPML_LEARNER_USES_MODEL, bayes_net_keys(true))};
+          SPML_LEARNER_VARIANCE | SPML_LEARNER_USES_MODEL | SPML_LEARNER_PROGRESS, bayes_net_keys(true))};
   return list;
 }
 

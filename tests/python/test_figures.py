@@ -147,6 +147,36 @@ def diagnose_figures():
     heights = [p.get_height() for p in ro.patches]
     check(heights == [0.0087, 0.0041, 0.0057, 0.0027], f"rollouts.png: bars {heights} are not report.json's errors")
     check("rad or m" in ro.get_ylabel(), f"rollouts.png: y label '{ro.get_ylabel()}' (a hinge and a slide)")
+    check("after 0.1 s" in ro.get_ylabel(), f"rollouts.png: y label '{ro.get_ylabel()}' does not give the horizon in s")
+    check(ro.get_yscale() == "linear", "rollouts.png: errors within a decade on a log axis")
+    title = res.axes[0].get_title().replace("\n", " ")
+    check("binned by time" in title and "800 bins of 50 samples (0.05 s)" in title,
+          f"residuals.png: the title '{title}' does not say how the 40 000 samples were binned")
+    rollouts_over_decades()
+
+
+def rollouts_over_decades():
+    """Rollout errors three decades apart, hinges only, one rollout diverged: a log y axis in rad,
+    every finite error drawn at its height, the divergence marked."""
+    saved = {}
+    real = matplotlib.figure.Figure.savefig
+    matplotlib.figure.Figure.savefig = lambda fig, path, **kw: saved.setdefault(os.path.basename(path), fig)
+    units = {j: diagnose_plots.HINGE for j in ("j1", "j2", "j3")}
+    report = {"rollout": {"split": "test", "horizon_s": 0.5, "windows": 20,
+                          "position_error_before": {"j1": 0.31, "j2": 0.0021, "j3": None},
+                          "position_error_after": {"j1": 0.00042, "j2": 0.0019, "j3": 0.05}}}
+    try:
+        diagnose_plots.rollout_figure(report, units, "")
+    finally:
+        matplotlib.figure.Figure.savefig = real
+    ax = saved["rollouts.png"].axes[0]
+    labelled(saved["rollouts.png"], "rollouts.png (decades)")
+    check(ax.get_yscale() == "log", "rollouts.png: errors three decades apart on a linear axis")
+    check(ax.get_ylabel().startswith("mean |position error| after 0.5 s [rad]"), f"rollouts.png: y label '{ax.get_ylabel()}'")
+    lo, hi = ax.get_ylim()
+    check(lo <= 0.00042 and hi >= 0.31, f"rollouts.png: y range {lo}..{hi} hides an error")
+    check(any(t.get_text() == "diverged" for t in ax.texts), "rollouts.png: the diverged rollout is not marked")
+    print(f"checked rollouts.png (decades): y = {ax.get_ylabel()!r}, {ax.get_yscale()} from {lo:.2g} to {hi:.2g}")
 
 
 def main():

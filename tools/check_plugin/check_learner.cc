@@ -88,9 +88,17 @@ std::string data_changed(const Data& given, const Data& used) {
 // One fit through the raw ABI, as the host makes it (defaults filled in from the key table),
 // on a copy of the data and of the model's coefficients (a learner that writes into its
 // inputs spoils only the copy; the inputs-untouched clause compares them).
+// What a fit through fit_progress reported: every fraction, in order.
+struct Reports {
+  std::vector<double> fractions;
+  static void hear(void* context, double fraction, const char*) { static_cast<Reports*>(context)->fractions.push_back(fraction); }
+};
+
 class Fit {
  public:
-  Fit(const spml_learner& l, const Data& train, std::uint64_t seed, const std::vector<std::pair<std::string, std::string>>& given)
+  // With `reports`, the fit goes through fit_progress (ABI revision 1) and records what it hears.
+  Fit(const spml_learner& l, const Data& train, std::uint64_t seed, const std::vector<std::pair<std::string, std::string>>& given,
+      Reports* reports = nullptr)
       : l_(l), data_(train), prior_(kPrior, kPrior + kParams), truth_(kTheta, kTheta + kParams) {
     const auto config = with_defaults(l.config_keys, given);
     std::vector<const char*> keys, values;
@@ -104,7 +112,8 @@ class Fit {
                                (l.flags & SPML_LEARNER_NEEDS_TRUTH) ? truth_.data() : nullptr};
     const spml_learner_data d = data_.view();
     char error[1024] = "";
-    state_ = l.fit(&d, &m, &c, error, sizeof error);
+    state_ = reports ? l.fit_progress(&d, &m, &c, &Reports::hear, reports, error, sizeof error)
+                     : l.fit(&d, &m, &c, error, sizeof error);
     error_ = error;
   }
   ~Fit() {
@@ -236,6 +245,30 @@ Outcome nan_refused(const spml_learner& l, const Data& train, std::uint64_t seed
   return pass("refused with a message");
 }
 
+// Revision 1: a learner flagged PROGRESS reports fractions within [0, 1] that never go back,
+// and fit_progress fits exactly as fit (the same predictions, bit for bit, for the same seed).
+Outcome progress(const spml_learner& l, const Data& train, const Data& query, const Prediction& fitted, std::uint64_t seed,
+                 const std::vector<std::pair<std::string, std::string>>& given) {
+  if (!(l.flags & SPML_LEARNER_PROGRESS)) return skip("not flagged PROGRESS (ABI revision 1)");
+  Reports heard;
+  Fit fit(l, train, seed, given, &heard);
+  if (!fit.state()) return fail("fit_progress failed where fit succeeded: " + (fit.error().empty() ? "no message" : fit.error()));
+  const std::vector<double>& f = heard.fractions;
+  if (f.empty()) return fail("flagged PROGRESS, but fit_progress reported nothing");
+  for (size_t i = 0; i < f.size(); ++i) {
+    if (!(f[i] >= 0 && f[i] <= 1))
+      return fail("report " + std::to_string(i + 1) + " of " + std::to_string(f.size()) + ": fraction " + num(f[i]) +
+                  " is outside [0, 1]");
+    if (i > 0 && f[i] < f[i - 1])
+      return fail("report " + std::to_string(i + 1) + " of " + std::to_string(f.size()) + ": the fraction went back from " +
+                  num(f[i - 1]) + " to " + num(f[i]));
+  }
+  const std::string d = difference(fitted, predict(l, fit, query));
+  if (!d.empty()) return fail("fit_progress and fit with seed " + std::to_string(seed) + " predict differently: " + d);
+  return pass(std::to_string(f.size()) + " reports, " + num(f.front()) + " to " + num(f.back()) +
+              ", never back; predictions identical to fit's");
+}
+
 void check_one(const spml_learner& l, Recorder& r) {
   const std::string name = l.name;
   if (std::string why = learner_problem(l); !why.empty()) return r.record(name, "callbacks", fail(why));
@@ -282,6 +315,7 @@ void check_one(const spml_learner& l, Recorder& r) {
   });
   r.run(name, "inputs-untouched", [&] { return inputs_untouched(l, *a, train, query); });
   r.run(name, "nan-refused", [&] { return nan_refused(l, train, r.seed(), given); });
+  r.run(name, "progress", [&] { return progress(l, train, query, pa, r.seed(), given); });
 }
 
 }  // namespace

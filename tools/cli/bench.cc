@@ -70,8 +70,10 @@ void add_bench(CLI::App& app) {
                   "one learner of the run (e.g. GP.max_evals=200; it wins over an unscoped value)");
   auto quiet = std::make_shared<bool>(false);
   cmd->add_flag("--quiet,-q", *quiet, "No progress output (errors and the closing line only)");
-  auto heartbeat = std::make_shared<double>(15);
-  cmd->add_option("--heartbeat", *heartbeat, "Seconds between 'still fitting' lines during one long fit (0: none)")
+  auto heartbeat = std::make_shared<double>(5);
+  cmd->add_option("--heartbeat", *heartbeat,
+                  "Seconds between progress lines during one long fit: fraction done and ETA where the learner reports "
+                  "its progress, else 'still fitting' (0: none)")
       ->capture_default_str()
       ->check(finite_number(0, 1e6));
   cmd->add_option("--train-max", *train_max, "Use at most this many training rows, evenly strided, or 'all'")

@@ -8,7 +8,8 @@
   unexplained.png (when report.json lists unexplained joints) each such joint's held-out
                  residual and the GP fitted to it against its most relevant input (unexplained.csv)
   rollouts.png   (when report.json has rollouts) open-loop rollouts under the measured torques:
-                 the position error at the end of the horizon, model as given and extended
+                 the position error at the end of the horizon (s), model as given and extended,
+                 in rad or m; a log axis when the errors lie a decade or more apart
 Reads DIR/series.csv and DIR/report.json (written by diagnose). Units come from each joint's
 type in the model file report.json names (hinge: N·m, rad; slide/prismatic: N, m)."""
 import csv
@@ -72,9 +73,14 @@ def residual_figure(t, test, col, joints, units, out):
         ax.axhline(0, color="black", lw=0.5)
         ax.set_ylabel(f"{j} [{units[j]['torque']}]", fontsize=8)
         ax.grid(alpha=0.3)
-    how = f" (each of {MAX_BINS} bins of {len(t) / MAX_BINS:.0f} samples)" if binned else ""
-    axes[0, 0].set_title("\n".join(textwrap.wrap("torque residual (measured − model) on the test split" + how, 70)),
-                         fontsize=10)
+    if binned:
+        # Say what a reader sees is not the samples: how they were binned, and over what width.
+        width = (t[-1] - t[0]) / MAX_BINS
+        title = (f"torque residual (measured − model) on the test split, binned by time: {MAX_BINS} bins of "
+                 f"{len(t) / MAX_BINS:.0f} samples ({width:.3g} s) each, band = min..max, line = RMS per bin")
+    else:
+        title = "torque residual (measured − model) on the test split, every sample"
+    axes[0, 0].set_title("\n".join(textwrap.wrap(title, 80)), fontsize=10)
     axes[0, 0].legend(loc="upper right", fontsize=7, ncol=2)
     axes[-1, 0].set_xlabel("t [s]")
     fig.tight_layout()
@@ -111,18 +117,27 @@ def rollout_figure(report, units, out):
     unit = kinds.pop() if len(kinds) == 1 else "rad or m (per joint type)"
     x = np.arange(len(joints))
     fig, ax = plt.subplots(figsize=(max(6, 0.9 * len(joints) + 3), 4))
+    drawn = []
     for shift, errors, color, name in ((-0.2, before, "tab:red", "model as given"), (0.2, after, "tab:blue", "extended model")):
         # a rollout that diverged has an infinite error (null in report.json): no bar, a mark
         values = [float(errors[j]) if errors.get(j) is not None else math.inf for j in joints]
         finite = [v if math.isfinite(v) else 0.0 for v in values]
+        drawn += [v for v in finite if v > 0]
         ax.bar(x + shift, finite, 0.4, color=color, label=name)
         for k, v in enumerate(values):
-            if not math.isfinite(v):
-                ax.annotate("diverged", (x[k] + shift, 0), rotation=90, ha="center", va="bottom", fontsize=7)
+            if not math.isfinite(v):   # at the foot of the axes, which a log axis does not have at 0
+                ax.annotate("diverged", (x[k] + shift, 0.02), xycoords=ax.get_xaxis_transform(), rotation=90,
+                            ha="center", va="bottom", fontsize=7)
+    # Errors a decade or more apart (a joint the extension fixed, one it did not need): on a
+    # linear axis the small ones are invisible slivers, so the axis is logarithmic.
+    log = len(drawn) >= 2 and max(drawn) >= 10 * min(drawn)
+    if log:
+        ax.set_yscale("log")
+        ax.set_ylim(min(drawn) / 3, max(drawn) * 3)
     ax.set_xticks(x)
     ax.set_xticklabels(joints, rotation=30 if len(joints) > 4 else 0, ha="right" if len(joints) > 4 else "center")
     ax.set_xlabel("joint")
-    ax.set_ylabel(f"position error at {ro.get('horizon_s', 0):g} s [{unit}]")
+    ax.set_ylabel(f"mean |position error| after {ro.get('horizon_s', 0):g} s [{unit}]" + (", log scale" if log else ""))
     ax.set_title("\n".join(textwrap.wrap(
         f"open-loop rollouts under the measured torques: {ro.get('windows', '?')} windows of "
         f"{ro.get('horizon_s', 0):g} s on '{ro.get('split', '?')}' (mean over windows of the |error| at the end)", 60)), fontsize=10)

@@ -1,4 +1,4 @@
-/* spml learner plugin ABI, version 2.
+/* spml learner plugin ABI, version 2 (revision 1).
  *
  * A learner is a shared library that exports two C functions (spml/abi.h explains the
  * conventions shared with the force-plugin ABI):
@@ -20,6 +20,12 @@
  * Version history: 1 - config_keys was a comma-separated string. 2 - config_keys is a typed
  * spml_config_key table (the host checks every --set value before any fit), export macro
  * SPML_EXPORT from spml/abi.h.
+ *
+ * Revisions add to a version without breaking it, so the version number stays: a revision
+ * appends optional members at the end of spml_learner and guards each with a flag. The host
+ * reads an appended member only when its flag is set, so a library built against an older
+ * revision (whose entries end earlier) keeps loading and working unchanged.
+ *   2.1 - SPML_LEARNER_PROGRESS and fit_progress: a fit that reports how far it has come.
  */
 #ifndef SPML_LEARNER_H
 #define SPML_LEARNER_H
@@ -34,6 +40,7 @@ extern "C" {
 #endif
 
 #define SPML_LEARNER_ABI_VERSION 2
+#define SPML_LEARNER_ABI_REVISION 1   /* the newest revision this header describes (see above) */
 
 /* flags */
 #define SPML_LEARNER_USES_MODEL      1u  /* reads phi/theta; the host must supply a parametric model */
@@ -43,6 +50,15 @@ extern "C" {
 #define SPML_LEARNER_DETERMINISTIC  16u  /* ignores the seed: repetitions are identical */
 #define SPML_LEARNER_NEEDS_PRIOR    32u  /* fit() fails without the model's prior coefficients */
 #define SPML_LEARNER_NEEDS_TRUTH    64u  /* fit() fails without the model's true coefficients */
+#define SPML_LEARNER_PROGRESS      128u  /* revision 1: the entry has fit_progress (the host reads it only then) */
+
+/* Revision 1: called by fit_progress, on the thread that called it, with the fraction of the
+ * fit done so far - in [0, 1], never smaller than the fraction of an earlier call - and a short
+ * text naming the stage ("subset fit", "epochs"; "" when there is nothing to say; the host
+ * copies it, so it need only live during the call). The fraction is a best estimate of the
+ * fit's work, so that elapsed / fraction foretells the fit's time; it need not reach 1
+ * (fit_progress returning is what ends the fit). */
+typedef void (*spml_learner_progress)(void* context, double fraction, const char* stage);
 
 typedef struct spml_learner_data {
   int64_t rows;
@@ -91,6 +107,13 @@ typedef struct spml_learner {
    * (0 when the learner has none). */
   int32_t (*coefficients)(void* state, double* theta, int32_t capacity);
   void (*destroy)(void* state);
+
+  /* Revision 1 (read only when flags has SPML_LEARNER_PROGRESS). As fit, calling
+   * progress(context, fraction, stage) now and then while it works. It must fit exactly as fit
+   * does (the same state, the same predictions for the same seed); progress is never NULL. */
+  void* (*fit_progress)(const spml_learner_data* train, const spml_learner_model* model,
+                        const spml_learner_config* config, spml_learner_progress progress, void* context,
+                        char* error, size_t error_size);
 } spml_learner;
 
 #ifdef __cplusplus

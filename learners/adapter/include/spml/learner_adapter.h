@@ -4,8 +4,11 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <exception>
+#include <functional>
 #include <map>
 #include <memory>
 #include <string>
@@ -40,6 +43,36 @@ struct Config {
   double number(const std::string& key, double fallback) const;   // throws naming the key
 };
 
+// Where a fit's progress goes (ABI revision 1): the host's callback, or nowhere. Keeps the
+// promise the ABI makes for the learner - fractions within [0, 1] that never go back - so a
+// learner can report its best estimate (a phase that ends early, a guess that was too low)
+// without checking that itself.
+class Progress {
+ public:
+  Progress() = default;
+  Progress(spml_learner_progress callback, void* context) : callback_(callback), context_(context) {}
+  void operator()(double fraction, const char* stage = "") {
+    if (!callback_ || !(fraction == fraction)) return;   // NaN: nothing to say
+    last_ = std::max(last_, std::min(1.0, std::max(0.0, fraction)));
+    callback_(context_, last_, stage ? stage : "");
+  }
+  bool active() const { return callback_ != nullptr; }
+  double last() const { return last_; }
+
+ private:
+  spml_learner_progress callback_ = nullptr;
+  void* context_ = nullptr;
+  double last_ = 0;
+};
+
+// Maps a part of a fit onto [from, to] of the whole: part(f) reports from + f (to - from). A
+// learner made of stages (outputs fitted one after the other, a subset fit then a full one)
+// hands one to each stage.
+inline std::function<void(double)> progress_part(Progress& whole, double from, double to, const char* stage) {
+  if (!whole.active()) return {};
+  return [&whole, from, to, stage](double f) { whole(from + std::min(1.0, std::max(0.0, f)) * (to - from), stage); };
+}
+
 class Learner {
  public:
   virtual ~Learner() = default;
@@ -49,6 +82,9 @@ class Learner {
   virtual Eigen::VectorXd coefficients() const { return {}; }
   std::string notes;
   Eigen::Index fitted_inputs = 0, fitted_outputs = 0;   // set by the adapter: what predict must match
+  // During fit(): reports to the host when it asked for progress (fit_progress), else nothing.
+  // A learner flagged SPML_LEARNER_PROGRESS calls it; the adapter reports 1 when fit returns.
+  Progress progress;
 };
 
 // Throws unless the host passed a regressor with the model's parameter count.
@@ -62,11 +98,21 @@ template <class T>
 struct Adapter {
   static void* fit(const spml_learner_data* train, const spml_learner_model* model, const spml_learner_config* config,
                    char* error, size_t error_size) {
+    return fit_progress(train, model, config, nullptr, nullptr, error, error_size);
+  }
+  // fit with progress (ABI revision 1); the same fit, only observed.
+  static void* fit_progress(const spml_learner_data* train, const spml_learner_model* model,
+                            const spml_learner_config* config, spml_learner_progress callback, void* context, char* error,
+                            size_t error_size) {
     try {
       const View data(*train);
       require_finite_training_data(data);
       auto learner = std::make_unique<T>();
+      learner->progress = Progress(callback, context);
+      learner->progress(0.0, "start");
       learner->fit(data, *model, Config(config));
+      learner->progress(1.0, "done");
+      learner->progress = Progress();   // the host's callback is valid during this call only
       learner->fitted_inputs = data.X.cols();
       learner->fitted_outputs = data.outputs;
       return learner.release();
@@ -97,11 +143,13 @@ struct Adapter {
   static void destroy(void* state) { delete static_cast<T*>(state); }
 };
 
+// The entry of learner T. fit_progress is always filled in; the host uses it when `flags` has
+// SPML_LEARNER_PROGRESS, which a learner sets when its fit calls `progress` along the way.
 template <class T>
 spml_learner make_learner(const char* name, const char* summary, uint32_t flags, const spml_config_key* keys) {
   return spml_learner{SPML_LEARNER_ABI_VERSION, name, summary, flags, keys,
                       &Adapter<T>::fit, &Adapter<T>::predict, &Adapter<T>::notes,
-                      &Adapter<T>::coefficients, &Adapter<T>::destroy};
+                      &Adapter<T>::coefficients, &Adapter<T>::destroy, &Adapter<T>::fit_progress};
 }
 
 }  // namespace spml::adapter

@@ -8,6 +8,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -71,7 +72,19 @@ struct FitOptions {
   // which is where the LML is measured. Prediction always uses every row.
   int subset_rows = 0;
   int final_evals = 6;
+  // Called after every likelihood evaluation with the fraction of fit()'s work done so far, a
+  // best estimate (see fit_work), and with the fraction at which fit() returns when it ends.
+  // The work counts one posterior on all rows after the fit (half an evaluation), which the
+  // caller builds; the caller reports the rest. May be empty.
+  std::function<void(double)> progress;
 };
+
+// The work fit() is expected to do, in units of n^3 (one evaluation on n rows costs about
+// n^3): per stage, its evaluations times its rows cubed, plus half an evaluation on all rows
+// for the posterior. A stage run to convergence is expected to take min(max_evals,
+// 4 (parameters optimised) + 10) evaluations (SimDyn: 50 for the zero-mean GP's 11, 102 for
+// SPGP's 28 measured); the staged fit's last stage takes final_evals. The basis of progress.
+double fit_work(Eigen::Index rows, int inputs, int params, const FitOptions& options);
 
 struct FitResult {
   Hyper hyper;

@@ -35,9 +35,10 @@ struct BenchOptions {
   Eigen::Index train_max = 0;       // 0: all training rows; else an even stride down to at most this
   Eigen::Index test_max = 5000;     // likewise per test split (0: all)
   std::function<void(const std::string&)> log;   // progress lines; may be empty
-  // While one unit fits longer than this, a line every this many seconds ("still fitting");
-  // 0: none. Called from a second thread while the fit runs.
-  double heartbeat_seconds = 15;
+  // While one unit fits longer than this, a line every this many seconds: the fraction done,
+  // the fit's and the run's ETA when the learner reports progress (SPML_LEARNER_PROGRESS),
+  // else "still fitting"; 0: none. Called from a second thread while the fit runs.
+  double heartbeat_seconds = 5;
   // Sharding: the (learner, repetition) units are numbered in run order and this run fits
   // only those with number % shards == shard - 1; units of other shards are used when
   // already present in out/units and left alone otherwise.

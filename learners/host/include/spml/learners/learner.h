@@ -5,6 +5,7 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <memory>
 #include <set>
@@ -26,9 +27,16 @@ class LearnerError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// Hears how far a fit has come: the fraction done in [0, 1], never going back, and the
+// stage's text (ABI revision 1, spml_learner_progress). Called on the fitting thread.
+using ProgressFn = std::function<void(double fraction, const char* stage)>;
+
 struct LearnerConfig {
   std::vector<std::pair<std::string, std::string>> values;   // key=value as given by the user
   std::uint64_t seed = 1;
+  // When set, learners that can (flag SPML_LEARNER_PROGRESS; compositions always) report
+  // their progress here during fit(). It changes nothing in the fit.
+  ProgressFn progress;
 };
 
 struct LearnerModel {
@@ -60,6 +68,7 @@ class Learner {
   virtual Eigen::VectorXd coefficients() const = 0;
   bool has_variance() const { return flags() & SPML_LEARNER_VARIANCE; }
   bool uses_model() const { return flags() & SPML_LEARNER_USES_MODEL; }
+  bool reports_progress() const { return flags() & SPML_LEARNER_PROGRESS; }
 };
 
 // How learner libraries are recognised (symbol prefix, ABI version, search folders).
