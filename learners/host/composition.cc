@@ -49,6 +49,7 @@ class Composition : public Learner {
       reached = std::max(reached, static_cast<double>(k + 1) / stages);
       if (config.progress) config.progress(reached, k % 2 == 0 ? "first part fitted" : "residual part fitted");
     };
+    if (config.progress) config.progress(0.0, "start");
     for (int it = 0; it < iterations; ++it) {
       if (it > 0) target = y - b_->predict(inputs_of(train)).mean;   // eq. 6: A on what B leaves
       part.Y = &target;
