@@ -139,6 +139,9 @@ class Progress {
   std::chrono::steady_clock::time_point start_;
 };
 
+// The stage fit_unit reports once the fit has returned, while it predicts.
+constexpr const char* kPredicting = "predicting the test splits";
+
 // What a fit reports while it runs (LearnerConfig::progress), for the heartbeat's thread.
 class FitProgress {
  public:
@@ -179,7 +182,12 @@ class Heartbeat {
             double f = 0;
             std::string stage;
             // Below 0.5 % a projection multiplies the noise of the first moments by 200 or more.
-            if (fit.get(&f, &stage) && f >= 0.005) {
+            const bool reported = fit.get(&f, &stage);
+            if (reported && stage == kPredicting) {
+              bool guessed = false;
+              const double eta = run.eta_during(name, t, 0.0, &guessed);
+              log(tag + ": fitted, " + stage + ", " + clock_text(t) + " elapsed; run ETA " + (guessed ? "~" : "") + clock_text(eta));
+            } else if (reported && f >= 0.005) {
               const double total = t / f, left = std::max(0.0, total - t);
               bool guessed = false;
               const double eta = run.eta_during(name, total, left, &guessed);
@@ -487,6 +495,7 @@ MatrixFile fit_unit(Learner& learner, const std::vector<Part>& parts, const Lear
   const auto t0 = std::chrono::steady_clock::now();
   learner.fit(parts.front().data(true), lm, config);
   const auto t1 = std::chrono::steady_clock::now();
+  if (config.progress) config.progress(1.0, kPredicting);   // the heartbeat says the fit is over
   MatrixFile unit;
   std::ostringstream line;
   for (size_t pi = 1; pi < parts.size(); ++pi) {

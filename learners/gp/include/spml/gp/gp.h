@@ -79,9 +79,9 @@ struct FitOptions {
   std::function<void(double)> progress;
 };
 
-// The work fit() is expected to do, in units of n^3 (one evaluation on n rows costs about
-// n^3): per stage, its evaluations times its rows cubed, plus half an evaluation on all rows
-// for the posterior. A stage run to convergence is expected to take min(max_evals,
+// The work fit() is expected to do, in flops: per stage, its evaluations times the cost of
+// one on its rows (n^2 (n + 1500): the n^3 of the factorisation and inverse, and the per-entry
+// work on the n x n kernel), plus half an evaluation on all rows for the posterior. A stage run to convergence is expected to take min(max_evals,
 // 4 (parameters optimised) + 10) evaluations (SimDyn: 50 for the zero-mean GP's 11, 102 for
 // SPGP's 28 measured); the staged fit's last stage takes final_evals. The basis of progress.
 double fit_work(Eigen::Index rows, int inputs, int params, const FitOptions& options);
