@@ -181,13 +181,12 @@ class Heartbeat {
             const double t = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
             double f = 0;
             std::string stage;
-            // Below 0.5 % a projection multiplies the noise of the first moments by 200 or more.
             const bool reported = fit.get(&f, &stage);
             if (reported && stage == kPredicting) {
               bool guessed = false;
               const double eta = run.eta_during(name, t, 0.0, &guessed);
               log(tag + ": fitted, " + stage + ", " + clock_text(t) + " elapsed; run ETA " + (guessed ? "~" : "") + clock_text(eta));
-            } else if (reported && f >= 0.005) {
+            } else if (reported && f >= 0.005) {   // below, t / f would blow up the first moments' noise
               const double total = t / f, left = std::max(0.0, total - t);
               bool guessed = false;
               const double eta = run.eta_during(name, total, left, &guessed);
