@@ -360,8 +360,9 @@ TEST(DiagnoseCases, NegativeFrictionLevelsAreRefused) {
   EXPECT_TRUE(written_causes(r).empty()) << r["causes"].dump(1);
   for (const auto& c : r["causes"]) {
     const nlohmann::json written = c.value("params_written", nlohmann::json::object());   // a temporary otherwise
-    for (const auto& [k, v] : written.items())
-      if (k.find(".f") != std::string::npos || k.find(".level") != std::string::npos) EXPECT_GE(v.get<double>(), 0) << k;
+    for (const auto& [k, v] : written.items()) {
+      if (k.find(".f") != std::string::npos || k.find(".level") != std::string::npos) { EXPECT_GE(v.get<double>(), 0) << k; }
+    }
   }
   expect_final_not_worse(r);
 }

@@ -188,8 +188,9 @@ TEST(DiagnoseRealistic, CoulombUnderAControllerIsNotStribeck) {
   for (const auto& e : named) std::cout << " " << e;
   std::cout << "\n";
   EXPECT_EQ(named, std::set<std::string>{"coulomb@j2"}) << r["causes"].dump(1);
-  for (const auto& c : r["causes"])
-    if (c["effect"] == "coulomb") EXPECT_NEAR(c["params"]["j2.fc"].get<double>(), fc, 0.1 * fc);
+  for (const auto& c : r["causes"]) {
+    if (c["effect"] == "coulomb") { EXPECT_NEAR(c["params"]["j2.fc"].get<double>(), fc, 0.1 * fc); }
+  }
 }
 
 // Per joint: the RMSE of a model's inverse dynamics against the measured torques of a split.
