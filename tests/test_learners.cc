@@ -794,6 +794,7 @@ TEST(Cli, JsonListsAndComparison) {
     if (l["name"] == "GP") {
       gp = true;
       EXPECT_NE(std::find(l["flags"].begin(), l["flags"].end(), "variance"), l["flags"].end()) << l.dump();
+      EXPECT_NE(std::find(l["flags"].begin(), l["flags"].end(), "progress"), l["flags"].end()) << l.dump();   // revision 1
       bool max_evals = false;
       for (const auto& k : l["config_keys"]) max_evals |= k["name"] == "max_evals" && k["default"] == "1000" && k["type"] == "integer";
       EXPECT_TRUE(max_evals) << l.dump();

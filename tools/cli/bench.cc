@@ -34,7 +34,7 @@ nlohmann::json learner_flags(std::uint32_t f) {
       {SPML_LEARNER_USES_MODEL, "uses_model"},       {SPML_LEARNER_VARIANCE, "variance"},
       {SPML_LEARNER_PARAMETRIC, "parametric"},       {SPML_LEARNER_NONPARAMETRIC, "nonparametric"},
       {SPML_LEARNER_DETERMINISTIC, "deterministic"}, {SPML_LEARNER_NEEDS_PRIOR, "needs_prior"},
-      {SPML_LEARNER_NEEDS_TRUTH, "needs_truth"}};
+      {SPML_LEARNER_NEEDS_TRUTH, "needs_truth"},     {SPML_LEARNER_PROGRESS, "progress"}};
   nlohmann::json out = nlohmann::json::array();
   for (const auto& [bit, name] : names)
     if (f & bit) out.push_back(name);

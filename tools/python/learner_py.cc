@@ -34,6 +34,7 @@ pb::dict flag_dict(std::uint32_t f) {
   d["deterministic"] = bool(f & SPML_LEARNER_DETERMINISTIC);
   d["needs_prior"] = bool(f & SPML_LEARNER_NEEDS_PRIOR);
   d["needs_truth"] = bool(f & SPML_LEARNER_NEEDS_TRUTH);
+  d["progress"] = bool(f & SPML_LEARNER_PROGRESS);   // ABI revision 1: reports progress during fit
   return d;
 }
 
