@@ -65,8 +65,12 @@ MjcfRegressor::MjcfRegressor(const std::string& mjcf_file, const RegressorOption
   std::vector<double> values;
   static const char* kBody[10] = {"m", "mx", "my", "mz", "Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz"};
   for (int b = 1; b < m->nbody; ++b) {
+    // An unnamed body is called body#<id>: '#' keeps it apart from a body named "body3".
     const char* bn = mj_id2name(m, mjOBJ_BODY, b);
-    std::string body = bn ? bn : "body" + std::to_string(b);
+    std::string body = bn ? bn : "body#" + std::to_string(b);
+    if (!bn && mj_name2id(m, mjOBJ_BODY, body.c_str()) >= 0)
+      throw std::runtime_error(mjcf_file + ": body " + std::to_string(b) + " has no name and another body is named '" + body +
+                               "': name body " + std::to_string(b));
     // Inertia about the body origin in body coordinates from MuJoCo's (mass, ipos, iquat, diag).
     double mass = m->body_mass[b];
     Eigen::Vector3d c(m->body_ipos + 3 * b);
@@ -211,6 +215,13 @@ Eigen::MatrixXd stacked_base_regressor(const MjcfRegressor& reg, const MjcfRegre
   return A;
 }
 
+Eigen::VectorXd stacked_torques(const Split& s, const std::string& source) {
+  if (s.Y.size() > 0 && s.Y.cwiseAbs().maxCoeff() == 0)
+    throw DatasetError((source.empty() ? "" : source + ": ") + "split '" + s.name +
+                       "': every torque is zero: there is nothing to identify (a sensor not read?)");
+  return stacked_targets(s.Y);
+}
+
 Identification identify(const MjcfRegressor& reg, const MjcfRegressor::Base& base, const Dataset& ds,
                         const std::string& split) {
   auto stack = [&](const Split& s, Eigen::MatrixXd& A, Eigen::VectorXd& b) {
@@ -220,7 +231,7 @@ Identification identify(const MjcfRegressor& reg, const MjcfRegressor::Base& bas
     } catch (const DatasetError& e) {
       throw DatasetError((ds.source.empty() ? "" : ds.source + ": ") + e.what());
     }
-    b = stacked_targets(s.Y);
+    b = stacked_torques(s, ds.source);
   };
   Identification out;
   out.names = base.names;

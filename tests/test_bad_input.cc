@@ -180,7 +180,16 @@ TEST(Hardening, EveryFloatOptionMustBeFinite) {
   expect_error(spml("plot --results " + f("none.csv") + " --out " + f("p1") + " --window 0"), 2, {"--window: '0' is outside (0,"});
   expect_error(spml("import --text " + f("log.txt") + "=a --x a --y a --lowpass nan -o " + f("l.h5")), 2,
                {"--lowpass: 'nan' is not a finite number"});
+  expect_error(spml("identify --model " + mjcf("planar_arm3.xml") + " --data " + f("arm.h5") + " --estimator consistent --prior-weight nan"), 2,
+               {"--prior-weight: 'nan' is not a finite number"});
   EXPECT_FALSE(fs::exists(f("d1")));
+}
+
+// Output that never reached its file is a failure: a --json document into a full device.
+TEST(Hardening, StandardOutputThatCannotBeWrittenIsAnError) {
+  if (!fs::exists("/dev/full")) GTEST_SKIP() << "no /dev/full on this machine";
+  for (const std::string cmd : {std::string("learners --json"), std::string("plugins --json"), "regressor --model " + mjcf("planar_arm3.xml") + " --json"})
+    expect_error("(" + spml(cmd) + " >/dev/full)", 1, {"could not write standard output"});   // stderr stays on the pipe
 }
 
 TEST(Hardening, TextLogsEmptyNamesAndRaggedLines) {

@@ -1,5 +1,7 @@
 #include <gtest/gtest.h>
 
+#include <algorithm>
+
 #include <Eigen/Dense>
 #include <cmath>
 #include <fstream>
@@ -450,6 +452,35 @@ TEST(BaseParameters, UnnamedAndFreeJointsAreRefusedByName) {
     EXPECT_EQ(r.exit_code, 1) << r.output;
     EXPECT_NE(r.output.find("spml: error: " + free + ": joint 0 (free, unnamed, in body #1): the regressor supports hinge and slide joints only"),
               std::string::npos) << r.output;
+  }
+}
+
+// An unnamed body is body#<id> in parameter names ('#' keeps it apart from a body named
+// "body2"; the names collided before); a model naming another body so is refused.
+TEST(BaseParameters, UnnamedBodiesGetNamesNoRealBodyHas) {
+  auto chain = [](const std::string& first) {
+    return "<mujoco><worldbody><body name=\"" + first + "\"><joint name=\"j0\" axis=\"0 1 0\"/><geom size=\"0.1\"/>"
+           "<body pos=\"0.3 0 0\"><joint name=\"j1\" axis=\"0 1 0\"/><geom size=\"0.1\"/></body></body></worldbody></mujoco>";
+  };
+  const std::string file = write_model("unnamed-body.xml", chain("body2"));
+  const MjcfRegressor reg(file);
+  const auto& names = reg.param_names();
+  EXPECT_NE(std::find(names.begin(), names.end(), "m:body2"), names.end());
+  EXPECT_NE(std::find(names.begin(), names.end(), "m:body#2"), names.end());
+  // identify --write-model: the unnamed body's inertial is a note; the run used to fail with
+  // "MuJoCo compiles body 'body2' of the written model to other parameters".
+  const std::string data = file + ".h5", written = file + ".identified.xml";
+  write_dataset(data, simulated(reg, file, 400));
+  const auto r = test::run(test::spml_bin() + " identify --estimator consistent --model " + file + " --data " + data + " --write-model " + written);
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("body 2 has no name in the MJCF"), std::string::npos) << r.output;
+  EXPECT_NO_THROW(MjcfRegressor{written});
+  const std::string clash = write_model("clash.xml", chain("body#2"));
+  try {
+    MjcfRegressor r(clash);
+    FAIL() << "two bodies under one name accepted";
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find("body 2 has no name and another body is named 'body#2'"), std::string::npos) << e.what();
   }
 }
 

@@ -311,7 +311,7 @@ ConsistentIdentification identify_consistent(const MjcfRegressor& reg, const Dat
     } catch (const DatasetError& e) {
       throw DatasetError(src + e.what());
     }
-    tau = stacked_targets(s.Y);
+    tau = stacked_torques(s, ds.source);
   };
   Eigen::MatrixXd W;
   Eigen::VectorXd tau;

@@ -8,6 +8,12 @@ MjcfEdits identified_model_edits(const MjcfRegressor& reg, const ConsistentIdent
   MjcfEdits edits;
   for (const auto& b : id.bodies) {
     if (!b.fitted) continue;
+    // The MJCF editor finds bodies by name; an unnamed one cannot be written.
+    if (!mj_id2name(reg.model(), mjOBJ_BODY, b.body_id)) {
+      notes.push_back("body " + std::to_string(b.body_id) + " has no name in the MJCF: its identified inertial (mass " +
+                      std::to_string(b.identified.mass) + ") is not written; name the body to have it written");
+      continue;
+    }
     MjcfEdits::Inertial in;
     in.body = b.name;
     in.mass = b.identified.mass;

@@ -98,7 +98,7 @@ void add_diagnose(CLI::App& app) {
       const std::string script = (std::filesystem::path(spml_share_dir()) / "plots" / "diagnose_plots.py").string();
       const std::string command = "/usr/bin/python3 " + shell_quote(script) + " " + shell_quote(staged);
       if (std::system(command.c_str()) != 0)
-        std::cerr << "spml: warning: plots not drawn (" << command << " failed; is python3-matplotlib installed?)\n";
+        std::cerr << "spml: warning: plots not drawn (" << command << " failed; its message is above: where it is a missing matplotlib, tools/install-deps.sh installs python3-matplotlib)\n";
     };
     const DiagnoseResult r = diagnose(*o, *out, plots);
     std::cout << r.summary;

@@ -87,7 +87,7 @@ void add_identify(CLI::App& app) {
                   "inertial realizable, joint terms >= 0, prior toward the MJCF (default with --write-model)")
       ->check(CLI::IsMember({"ls", "consistent"}));
   cmd->add_option("--prior-weight", a->prior_weight, "consistent: weight of the prior toward the MJCF (default 1)")
-      ->check(CLI::PositiveNumber);
+      ->check(finite_number(1e-6, 1e6));   // the bounds of diagnose's --prior-weight
   cmd->add_option("--write-model", a->write_model, "consistent: write the MJCF with the identified inertials and joint terms here");
   cmd->callback([a, cmd] {
     add_plugin_paths(a->plugin_paths);

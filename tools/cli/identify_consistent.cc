@@ -2,6 +2,7 @@
 
 #include "commands.h"
 
+#include <algorithm>
 #include <filesystem>
 #include <iomanip>
 #include <iostream>
@@ -89,7 +90,8 @@ std::vector<std::string> write_model(const ConsistentArgs& a, const MjcfRegresso
   const MjcfRegressor written(a.write_model, RegressorOptions{a.offsets});
   const Eigen::VectorXd& got = written.model_params();
   for (const auto& b : id.bodies) {
-    if (!b.fitted) continue;
+    const bool written_body = std::any_of(edits.inertials.begin(), edits.inertials.end(), [&](const auto& in) { return in.body == b.name; });
+    if (!b.fitted || !written_body) continue;
     const auto at = 10 * static_cast<Eigen::Index>(b.body_id - 1);
     if (got.size() != id.pi.size() || (got.segment<10>(at) - id.pi.segment<10>(at)).norm() > 1e-6 * id.pi.segment<10>(at).norm()) {
       std::filesystem::remove(a.write_model);

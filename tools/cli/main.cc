@@ -55,5 +55,10 @@ int main(int argc, char** argv) {
   } catch (const std::exception& e) {
     return fail(e.what(), 1);
   }
+  // A --json document or table that did not reach its file is a failure (a full disk, a
+  // closed pipe), not a silent success.
+  std::cout.flush();
+  if (!std::cout || std::fflush(stdout) != 0 || std::ferror(stdout))
+    return fail("could not write standard output (a full disk, or a closed pipe?)", 1);
   return 0;
 }

@@ -49,7 +49,7 @@ void add_plot(CLI::App& app) {
     const int rc = std::system(command.c_str());
     if (rc != 0)
       throw std::runtime_error("plotting failed (" + command + " exited with " + std::to_string(rc) +
-                               "; is python3-matplotlib installed? tools/install-deps.sh installs it)");
+                               "; its message is above: where it is a missing matplotlib, tools/install-deps.sh installs python3-matplotlib)");
   });
 }
 

@@ -11,6 +11,7 @@
 
 #include "diagnosis.h"
 #include "report.h"
+#include "spml/dataset.h"   // utf8_problem
 #include "spml/matrix_file.h"
 #include "spml/output_guard.h"
 
@@ -60,6 +61,8 @@ namespace fs = std::filesystem;
 // In the order they are moved into place: report.json last, so that a reader who sees it sees
 // the rest of the same run.
 const char* const kOutputs[] = {"extended.xml", "series.csv", "unexplained.csv", "report.md", "report.json"};
+// The figures tools/plots/diagnose_plots.py draws into plots/.
+const char* const kPlots[] = {"residuals.png", "states.png", "rollouts.png", "unexplained.png"};
 
 // The same file-identity check as generate, import and bench (spml/output_guard.h).
 void refuse_inputs_among_outputs(const DiagnoseOptions& o, const fs::path& out) {
@@ -71,11 +74,13 @@ void refuse_inputs_among_outputs(const DiagnoseOptions& o, const fs::path& out) 
 }
 
 // The staged folder is removed on every way out; its files are moved into out_dir together.
+// A folder out_dir the run itself created goes too when the run leaves it empty (a failure).
 struct Staging {
-  fs::path dir;
+  fs::path dir, created;
   ~Staging() {
     std::error_code ec;
     if (!dir.empty()) fs::remove_all(dir, ec);
+    if (!created.empty() && fs::is_empty(created, ec)) fs::remove(created, ec);
   }
 };
 
@@ -84,8 +89,13 @@ void publish(const fs::path& staged, const fs::path& out) {
   const int fd = ::open((out / ".spml-diagnose.lock").c_str(), O_CREAT | O_RDWR | O_CLOEXEC, 0644);
   if (fd >= 0) ::flock(fd, LOCK_EX);
   std::error_code ec;
-  fs::remove_all(out / "plots", ec);   // a run without plots must not show the last run's
-  if (fs::exists(staged / "plots")) fs::rename(staged / "plots", out / "plots");
+  // A run without plots must not show the last run's; files of the user's own stay.
+  for (const char* name : kPlots) fs::remove(out / "plots" / name, ec);
+  if (fs::exists(staged / "plots")) {
+    fs::create_directories(out / "plots");
+    for (const auto& f : fs::directory_iterator(staged / "plots")) fs::rename(f.path(), out / "plots" / f.path().filename());
+  }
+  fs::remove(out / "plots", ec);   // only when it is left empty
   for (const char* name : kOutputs)
     if (fs::exists(staged / name)) fs::rename(staged / name, out / name);
   if (fd >= 0) {
@@ -117,6 +127,18 @@ void DiagnoseOptions::check() const {
   in("min_ripple_periods", min_ripple_periods, 0, 1e6);
   in("ripple_gear", ripple_gear, 0, 1e9);
   in("prior_weight", prior_weight, 1e-6, 1e6);
+  // report.json names every input, and JSON holds only UTF-8: refuse here, naming the option,
+  // before anything is read or written.
+  auto utf8 = [](const char* name, const std::string& path) {
+    if (const std::string why = utf8_problem(path); !why.empty())
+      throw std::invalid_argument(std::string("diagnose option ") + name + ": the path is not UTF-8, which report.json cannot hold (" +
+                                  why + "); rename it");
+  };
+  utf8("model", model);
+  utf8("data", data);
+  for (const auto& p : more_data) utf8("data", p);
+  for (const auto& p : cross) utf8("cross", p);
+  utf8("fit_split", fit_split);
 }
 
 DiagnoseResult diagnose(const DiagnoseOptions& options, const std::string& out_dir,
@@ -127,9 +149,11 @@ DiagnoseResult diagnose(const DiagnoseOptions& options, const std::string& out_d
   Diagnosis d(options);
   if (out_dir.empty()) return d.run("");
   const fs::path out(out_dir);
+  if (const std::string why = utf8_problem(out_dir); !why.empty())
+    throw std::invalid_argument("diagnose: the output folder's path is not UTF-8, which report.json cannot hold (" + why + ")");
   refuse_inputs_among_outputs(options, out);
+  Staging staged{out / (".spml-diagnose-" + std::to_string(::getpid())), !fs::exists(out) ? out : fs::path()};
   fs::create_directories(out);
-  Staging staged{out / (".spml-diagnose-" + std::to_string(::getpid()))};
   fs::remove_all(staged.dir);
   fs::create_directories(staged.dir);
   DiagnoseResult r = d.run(staged.dir.string());

@@ -56,7 +56,10 @@ struct SplitData {
   std::unique_ptr<JointColumns> cols;
   BlockColumns base;
   Eigen::VectorXd b, given, y0;   // targets, prediction of the model as given, b - given
-  Eigen::VectorXd friction;       // MuJoCo's frictionloss torque - the regressor's fl*sign(qd), stacked (in given; empty: none)
+  // What the model as given adds beyond its regressor, stacked (in given; empty: none): MuJoCo's
+  // frictionloss torque - the regressor's fl*sign(qd), and the forces of declared plugins that
+  // have no regressor columns (stateful or nonlinear: simulated along the split as declared).
+  Eigen::VectorXd friction;
   Eigen::Index N = 0;
   std::vector<Section> sos;       // the parallel filter on this split's time base (empty: none)
   std::vector<Eigen::Index> runs; // first rows of the records after the first (several --data)
@@ -149,6 +152,7 @@ class Diagnosis {
   void map_outputs();
   void note_frictionloss();
   Eigen::VectorXd frictionloss_correction(const SplitData& d) const;
+  Eigen::VectorXd declared_forces(const SplitData& d) const;
   // prepare.cc
   SplitData prepare(const Split& s, const std::vector<Eigen::Index>& runs = {});
   void plan_parallel_filter();
@@ -239,6 +243,7 @@ class Diagnosis {
   DiagnoseOptions opt_;
   DiagnoseResult result_;
   std::unique_ptr<MjcfRegressor> reg_;
+  std::unique_ptr<ForceEffects> declared_;   // the model's own plugin declarations (declared_forces)
   MjcfRegressor::Base base_;
   Dataset ds_;
   std::string test_name_;

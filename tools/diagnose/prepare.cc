@@ -38,6 +38,7 @@ SplitData Diagnosis::prepare(const Split& s, const std::vector<Eigen::Index>& ru
   }
   d.b = stacked_targets(s.Y);
   d.friction = frictionloss_correction(d);
+  if (const Eigen::VectorXd f = declared_forces(d); f.size()) d.friction = d.friction.size() ? Eigen::VectorXd(d.friction + f) : f;
   d.given = d.base.times(base_.model_values);
   if (d.friction.size()) d.given += d.friction;
   d.y0 = d.b - d.given;

@@ -68,7 +68,7 @@ BlockColumns Diagnosis::simulated_columns(const PluginInstance& inst, const Spli
   const int O = static_cast<int>(s.split.Y.cols());
   Eigen::MatrixXd C = Eigen::MatrixXd::Zero(s.N * O, 1);
   std::vector<mjtNum> qfrc(static_cast<size_t>(m->nv));
-  inst.plugin().reset(inst.state());
+  if (inst.plugin().reset) inst.plugin().reset(inst.state());   // a declared plugin may be stateless (load.cc)
   for (Eigen::Index i = 0; i < s.N; ++i) {
     for (int j = 0; j < m->njnt; ++j) {
       d->qpos[m->jnt_qposadr[j]] = s.split.X(i, s.cols->q[static_cast<size_t>(j)]);
@@ -78,6 +78,7 @@ BlockColumns Diagnosis::simulated_columns(const PluginInstance& inst, const Spli
     inst.plugin().compute(inst.state(), m, d.get(), qfrc.data());
     for (int o = 0; o < O; ++o) C(o * s.N + i, 0) = -qfrc[static_cast<size_t>(s.cols->output_dof[static_cast<size_t>(o)])];
     if (i + 1 == s.N) break;
+    if (!inst.plugin().advance) continue;   // stateless: nothing to carry to the next row
     // To the next row in substeps of at most 5 ms, the velocity interpolated linearly: a
     // velocity held over a whole row flips the bristles a row late at each reversal.
     const double dt = s.split.t[i + 1] - s.split.t[i];

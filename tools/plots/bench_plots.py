@@ -81,8 +81,13 @@ def save(fig, out, name, written):
     for ext in ("png", "pdf"):
         path = os.path.join(out, f"{name}.{ext}")
         tmp = path + f".tmp-{os.getpid()}"
-        fig.savefig(tmp, dpi=150, bbox_inches="tight", format=ext)
-        os.replace(tmp, path)   # a reader never sees half a figure
+        try:
+            fig.savefig(tmp, dpi=150, bbox_inches="tight", format=ext)
+            os.replace(tmp, path)   # a reader never sees half a figure
+        except BaseException:
+            if os.path.exists(tmp):   # a full disk must not leave half a figure behind
+                os.remove(tmp)
+            raise
         written.append(path)
     plt.close(fig)
 

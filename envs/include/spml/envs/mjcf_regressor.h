@@ -142,6 +142,11 @@ struct JointColumns {
 Eigen::MatrixXd stacked_base_regressor(const MjcfRegressor& reg, const MjcfRegressor::Base& base, const RowMatrix& X,
                                        const JointColumns& cols, const std::string& where);
 
+// The split's torques stacked output-major (as the regressors above), refused when every one
+// is zero: relative errors over them are undefined and there is nothing to identify.
+// `source` (the dataset file, or "") prefixes the message.
+Eigen::VectorXd stacked_torques(const Split& s, const std::string& source);
+
 // Least-squares identification of base parameters on one split of a dataset whose X has
 // q:/qd:/qdd:<joint> and whose Y has tau:<joint> for every joint of the model.
 struct Identification {
