@@ -76,8 +76,11 @@ def residual_figure(t, test, col, joints, units, out):
     if binned:
         # Say what a reader sees is not the samples: how they were binned, and over what width.
         width = (t[-1] - t[0]) / MAX_BINS
+        # Equal-count bins hold floor or ceil of len/bins samples: say both when they differ.
+        lo_n, hi_n = len(t) // MAX_BINS, -(-len(t) // MAX_BINS)
+        per_bin = f"{lo_n}" if lo_n == hi_n else f"{lo_n}-{hi_n}"
         title = (f"torque residual (measured − model) on the test split, binned by time: {MAX_BINS} bins of "
-                 f"{len(t) / MAX_BINS:.0f} samples ({width:.3g} s) each, band = min..max, line = RMS per bin")
+                 f"{per_bin} samples ({width:.3g} s) each, band = min..max, line = RMS per bin")
     else:
         title = "torque residual (measured − model) on the test split, every sample"
     axes[0, 0].set_title("\n".join(textwrap.wrap(title, 80)), fontsize=10)
