@@ -138,8 +138,7 @@ class GaussianProcess : public Learner {
   void add_note(const std::string& s) { notes += (notes.empty() ? "" : "; ") + s; }
   // The stage text of a progress report (static: the ABI passes it as a plain C string).
   static const char* staged_text(Eigen::Index n, const gp::FitOptions& o) {
-    return o.subset_rows > 0 && static_cast<double>(n) > 1.5 * o.subset_rows ? "likelihood evaluations (subset, then all rows)"
-                                                                               : "likelihood evaluations";
+    return gp::staged(n, o) ? "likelihood evaluations (subset, then all rows)" : "likelihood evaluations";
   }
 
   std::vector<gp::Posterior> posteriors_;

@@ -412,10 +412,6 @@ Hyper kernel_first(Likelihood& lik, const Hyper& start, const FitOptions& option
   }
 }
 
-bool staged(Eigen::Index n, const FitOptions& options) {
-  return options.subset_rows > 0 && static_cast<double>(n) > 1.5 * options.subset_rows;
-}
-
 // The cost of one likelihood evaluation on n rows, in flops of the n^3 factorisation and
 // inverse plus the per-entry work on the n x n kernel (exp, the gradient's loop), which weighs
 // as some 1500 flops an entry: measured 0.024 s at 1000 rows, 1.51 s at 5000 (SimDyn, d = 9),
@@ -451,6 +447,10 @@ Plan plan_of(Eigen::Index n, int inputs, int params, const FitOptions& options) 
 }
 
 }  // namespace
+
+bool staged(Eigen::Index n, const FitOptions& options) {
+  return options.subset_rows > 0 && static_cast<double>(n) > 1.5 * options.subset_rows;
+}
 
 double fit_work(Eigen::Index rows, int inputs, int params, const FitOptions& options) {
   return plan_of(rows, inputs, params, options).total();

@@ -152,7 +152,7 @@ class Diagnosis {
   void map_outputs();
   void note_frictionloss();
   Eigen::VectorXd frictionloss_correction(const SplitData& d) const;
-  Eigen::VectorXd declared_forces(const SplitData& d) const;
+  void add_declared_forces(const SplitData& d, Eigen::VectorXd& into) const;
   // prepare.cc
   SplitData prepare(const Split& s, const std::vector<Eigen::Index>& runs = {});
   void plan_parallel_filter();
@@ -243,7 +243,7 @@ class Diagnosis {
   DiagnoseOptions opt_;
   DiagnoseResult result_;
   std::unique_ptr<MjcfRegressor> reg_;
-  std::unique_ptr<ForceEffects> declared_;   // the model's own plugin declarations (declared_forces)
+  std::unique_ptr<ForceEffects> declared_;   // the model's own plugin declarations (add_declared_forces)
   MjcfRegressor::Base base_;
   Dataset ds_;
   std::string test_name_;

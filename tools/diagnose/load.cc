@@ -17,13 +17,13 @@ void Diagnosis::load() {
   // since the `parameters` cause and the written inertials rest on it.
   notes_.push_back("base parameters: " + rank_decision_text(base_, reg_->param_names().size()));
   if (const std::string w = rank_decision_warning(base_); !w.empty()) notes_.push_back(w);
-  // The model's own inverse dynamics against the regressor: what the regressor leaves out
-  // (frictionloss, a stateful plugin, constraints) is said, per joint, before anything is named.
   declared_ = std::make_unique<ForceEffects>(reg_->model(), opt_.model);
   for (const auto& in : declared_->instances())
     if (!in.plugin().regressor)
       notes_.push_back("plugin '" + in.decl.instance + "' (" + in.decl.type + ") has no regressor columns: its force is simulated along the data "
                        "as declared and belongs to the model as given (and to the written model's score)");
+  // The model's own inverse dynamics against the regressor: what the regressor leaves out
+  // (frictionloss, a stateful plugin, constraints) is said, per joint, before anything is named.
   for (const auto& mm : reg_->inverse_mismatches()) {
     notes_.push_back(inverse_mismatch_text(mm));
     std::cerr << "spml: warning: " << opt_.model << ": " << notes_.back() << "\n";
@@ -42,10 +42,9 @@ void Diagnosis::load() {
   load_cross();
   if (fit_.split.y_columns != test_.split.y_columns)
     throw DatasetError(where + "the fit and test splits have different torque columns");
+  // Every torque zero is refused as each split is prepared (stacked_torques); one silent joint
+  // would make its relative errors inf and its causes meaningless.
   for (const SplitData* s : {&fit_, &test_}) {
-    if (s->split.Y.cwiseAbs().maxCoeff() == 0)
-      throw DatasetError(where + "split '" + s->name + "': every torque is zero: there is nothing to explain (a sensor not read?)");
-    // One silent joint would make its relative errors inf and its causes meaningless.
     for (Eigen::Index c = 0; c < s->split.Y.cols(); ++c)
       if (s->split.Y.col(c).cwiseAbs().maxCoeff() == 0)
         throw DatasetError(where + "split '" + s->name + "': column '" + s->split.y_columns[static_cast<size_t>(c)] +
@@ -139,20 +138,6 @@ void Diagnosis::note_frictionloss() {
 // the friction rows of its constraint forces) minus the regressor's term, stacked like b. The
 // model as given then predicts what MuJoCo would, and the soft zone near zero speed is not
 // left in the residual for candidates to explain. Empty when the model has no frictionloss.
-// The forces of the model's declared plugins that the regressor leaves out (no regressor
-// columns: a stateful stick_slip, a nonlinear effect), integrated along the split with their
-// declared parameters (simulated_columns), stacked like b. Empty when there are none. Without
-// them a model declaring stick_slip had its own friction named as `delay` and `offset`.
-Eigen::VectorXd Diagnosis::declared_forces(const SplitData& s) const {
-  Eigen::VectorXd out;
-  for (const auto& in : declared_->instances()) {
-    if (in.plugin().regressor) continue;
-    const Eigen::VectorXd f = simulated_columns(in.object, s).dense().col(0);
-    out = out.size() ? Eigen::VectorXd(out + f) : f;
-  }
-  return out;
-}
-
 Eigen::VectorXd Diagnosis::frictionloss_correction(const SplitData& s) const {
   const mjModel* m = reg_->model();
   bool any = false;
@@ -179,6 +164,19 @@ Eigen::VectorXd Diagnosis::frictionloss_correction(const SplitData& s) const {
     }
   }
   return out;
+}
+
+// Adds into `into` (stacked like b; empty: zeros) the forces of the model's declared plugins
+// that the regressor leaves out (no regressor columns: a stateful stick_slip, a nonlinear
+// effect), integrated along the split with their declared parameters (simulated_columns).
+// Without them a model declaring stick_slip had its own friction named as `delay` and `offset`.
+void Diagnosis::add_declared_forces(const SplitData& s, Eigen::VectorXd& into) const {
+  for (const auto& in : declared_->instances()) {
+    if (in.plugin().regressor) continue;
+    const Eigen::VectorXd f = simulated_columns(in.object, s).dense().col(0);
+    if (into.size()) into += f;
+    else into = f;
+  }
 }
 
 // Per output (Y column): the model joint it belongs to.

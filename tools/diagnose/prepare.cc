@@ -36,9 +36,9 @@ SplitData Diagnosis::prepare(const Split& s, const std::vector<Eigen::Index>& ru
       d.base.parts.emplace_back(A.middleRows(o * d.N, d.N));
     }
   }
-  d.b = stacked_targets(s.Y);
+  d.b = stacked_torques(s, opt_.data);
   d.friction = frictionloss_correction(d);
-  if (const Eigen::VectorXd f = declared_forces(d); f.size()) d.friction = d.friction.size() ? Eigen::VectorXd(d.friction + f) : f;
+  add_declared_forces(d, d.friction);
   d.given = d.base.times(base_.model_values);
   if (d.friction.size()) d.given += d.friction;
   d.y0 = d.b - d.given;

@@ -85,6 +85,8 @@ struct FitOptions {
 // 4 (parameters optimised) + 10) evaluations (SimDyn: 50 for the zero-mean GP's 11, 102 for
 // SPGP's 28 measured); the staged fit's last stage takes final_evals. The basis of progress.
 double fit_work(Eigen::Index rows, int inputs, int params, const FitOptions& options);
+// Whether fit() on n rows runs staged (a subset first, then all rows), as subset_rows asks.
+bool staged(Eigen::Index n, const FitOptions& options);
 
 struct FitResult {
   Hyper hyper;
