@@ -222,24 +222,48 @@ Eigen::VectorXd stacked_torques(const Split& s, const std::string& source) {
   return stacked_targets(s.Y);
 }
 
-Identification identify(const MjcfRegressor& reg, const MjcfRegressor::Base& base, const Dataset& ds,
-                        const std::string& split) {
-  auto stack = [&](const Split& s, Eigen::MatrixXd& A, Eigen::VectorXd& b) {
-    try {
-      const JointColumns cols(reg, s);
-      A = stacked_base_regressor(reg, base, s.X, cols, s.name);
-    } catch (const DatasetError& e) {
-      throw DatasetError((ds.source.empty() ? "" : ds.source + ": ") + e.what());
-    }
-    b = stacked_torques(s, ds.source);
-  };
+namespace {
+
+// The stacked base regressor and torques of one split, errors naming the dataset file.
+void stack_split(const MjcfRegressor& reg, const MjcfRegressor::Base& base, const Dataset& ds, const Split& s, Eigen::MatrixXd& A,
+                 Eigen::VectorXd& b) {
+  try {
+    const JointColumns cols(reg, s);
+    A = stacked_base_regressor(reg, base, s.X, cols, s.name);
+  } catch (const DatasetError& e) {
+    throw DatasetError((ds.source.empty() ? "" : ds.source + ": ") + e.what());
+  }
+  b = stacked_torques(s, ds.source);
+}
+
+// Refuses data that do not excite every base parameter, naming the parameters the data
+// leave free (the largest entries of the weakest direction). Returns the condition number.
+double check_excitation(const Eigen::JacobiSVD<Eigen::MatrixXd>& svd, const std::vector<std::string>& names, const std::string& where) {
+  const auto& sv = svd.singularValues();
+  const double condition = sv[0] > 0 ? sv[0] / sv[sv.size() - 1] : std::numeric_limits<double>::infinity();
+  if (condition < 1e10) return condition;
+  const Eigen::VectorXd v = svd.matrixV().col(sv.size() - 1);
+  std::vector<std::pair<double, int>> w;
+  for (int i = 0; i < v.size(); ++i) w.emplace_back(-std::fabs(v[i]), i);
+  std::sort(w.begin(), w.end());
+  std::string free;
+  for (size_t i = 0; i < w.size() && i < 3 && -w[i].first > 0.1; ++i) free += (free.empty() ? "" : "; ") + names[static_cast<size_t>(w[i].second)];
+  throw DatasetError(where + ": the data do not excite every base parameter (condition number " + number_text(condition, 4) +
+                     "): not identifiable from this data: " + free + " (does every joint move, with varying speed and acceleration?)");
+}
+
+}  // namespace
+
+Identification identify(const MjcfRegressor& reg, const MjcfRegressor::Base& base, const Dataset& ds, const std::string& split,
+                        const IdentifyOptions& options) {
   Identification out;
   out.names = base.names;
   out.prior = base.model_values;
+  out.estimator = options.estimator;
   Eigen::MatrixXd A;
   Eigen::VectorXd b;
   const Split& train = ds.get(split);
-  stack(train, A, b);
+  stack_split(reg, base, ds, train, A, b);
   const std::string where = (ds.source.empty() ? "" : ds.source + ": ") + "split '" + split + "'";
   if (A.rows() <= A.cols())
     throw DatasetError(where + ": " + std::to_string(A.rows()) + " equations (" + std::to_string(train.rows()) +
@@ -250,27 +274,43 @@ Identification identify(const MjcfRegressor& reg, const MjcfRegressor::Base& bas
   for (Eigen::Index c = 0; c < A.cols(); ++c) scale[c] = scale[c] > 0 ? scale[c] : 1.0;
   const Eigen::MatrixXd As = A * scale.cwiseInverse().asDiagonal();
   Eigen::JacobiSVD<Eigen::MatrixXd> svd(As, Eigen::ComputeThinU | Eigen::ComputeThinV);
-  const auto& sv = svd.singularValues();
-  out.condition = sv[0] > 0 ? sv[0] / sv[sv.size() - 1] : std::numeric_limits<double>::infinity();
-  if (!(out.condition < 1e10)) {
-    // Name the parameters the data leave free: the largest entries of the weakest direction.
-    const Eigen::VectorXd v = svd.matrixV().col(sv.size() - 1);
-    std::vector<std::pair<double, int>> w;
-    for (int i = 0; i < v.size(); ++i) w.emplace_back(-std::fabs(v[i]), i);
-    std::sort(w.begin(), w.end());
-    std::string names;
-    for (size_t i = 0; i < w.size() && i < 3 && -w[i].first > 0.1; ++i) names += (names.empty() ? "" : "; ") + out.names[w[i].second];
-    throw DatasetError(where + ": the data do not excite every base parameter (condition number " + number_text(out.condition, 4) +
-                       "): not identifiable from this data: " + names +
-                       " (does every joint move, with varying speed and acceleration?)");
-  }
-  out.estimate = scale.cwiseInverse().asDiagonal() * svd.solve(b);
+  out.condition = check_excitation(svd, out.names, where);
   const double dof = static_cast<double>(A.rows() - A.cols());
-  out.sigma = std::sqrt((b - A * out.estimate).squaredNorm() / dof);
-  // (A^T A)^-1 = D^-1 V S^-2 V^T D^-1 with D the column scales.
-  const Eigen::MatrixXd Vs = scale.cwiseInverse().asDiagonal() * svd.matrixV();
-  Eigen::MatrixXd cov = Vs * sv.cwiseInverse().cwiseAbs2().asDiagonal() * Vs.transpose();
-  out.std_error = (out.sigma * out.sigma * cov.diagonal()).cwiseSqrt();
+  if (options.estimator == "iv") {
+    // IDIM-IV: theta = (Z^T A)^-1 Z^T b, Z the regressor on the simulated states (instruments.h);
+    // covariance sigma^2 (Z^T A)^-1 Z^T Z (A^T Z)^-1.
+    if (options.mjcf_path.empty()) throw std::invalid_argument("identify: the IV estimator needs the MJCF's path to simulate");
+    SimulatedTwin twin;
+    try {
+      twin = simulated_twin(options.mjcf_path, train, {}, options.instruments);
+    } catch (const std::runtime_error& e) {
+      throw DatasetError(where + ": " + e.what());
+    }
+    Eigen::MatrixXd Z;
+    Eigen::VectorXd unused;
+    stack_split(reg, base, ds, twin.split, Z, unused);
+    const Eigen::MatrixXd Zs = Z * scale.cwiseInverse().asDiagonal();
+    const Eigen::MatrixXd ZA = Zs.transpose() * As;
+    const Eigen::FullPivLU<Eigen::MatrixXd> lu(ZA);
+    if (!lu.isInvertible())
+      throw DatasetError(where + ": the instruments (the model simulated along the data) do not span the base parameters: use --estimator ls");
+    const Eigen::VectorXd theta_s = lu.solve(Zs.transpose() * b);
+    out.estimate = scale.cwiseInverse().asDiagonal() * theta_s;
+    out.sigma = std::sqrt((b - A * out.estimate).squaredNorm() / dof);
+    const Eigen::MatrixXd P = lu.solve(Eigen::MatrixXd(Zs.transpose()));   // (Z^T A)^-1 Z^T
+    const Eigen::MatrixXd cov = scale.cwiseInverse().asDiagonal() * (P * P.transpose()) * scale.cwiseInverse().asDiagonal();
+    out.std_error = (out.sigma * out.sigma * cov.diagonal()).cwiseSqrt();
+    out.tracking_rms = twin.rms_tracking;
+    out.joints = twin.joints;
+  } else {
+    out.estimate = scale.cwiseInverse().asDiagonal() * svd.solve(b);
+    out.sigma = std::sqrt((b - A * out.estimate).squaredNorm() / dof);
+    // (A^T A)^-1 = D^-1 V S^-2 V^T D^-1 with D the column scales.
+    const auto& sv = svd.singularValues();
+    const Eigen::MatrixXd Vs = scale.cwiseInverse().asDiagonal() * svd.matrixV();
+    Eigen::MatrixXd cov = Vs * sv.cwiseInverse().cwiseAbs2().asDiagonal() * Vs.transpose();
+    out.std_error = (out.sigma * out.sigma * cov.diagonal()).cwiseSqrt();
+  }
   auto score = [&](const Split& s, const Eigen::MatrixXd& As_, const Eigen::VectorXd& bs) {
     Eigen::VectorXd r = bs - As_ * out.estimate;
     out.errors.push_back({s.name, s.rows(), r.norm() / bs.norm(), std::sqrt(r.squaredNorm() / static_cast<double>(bs.size()))});
@@ -280,7 +320,7 @@ Identification identify(const MjcfRegressor& reg, const MjcfRegressor::Base& bas
     if (s.name == split) continue;
     Eigen::MatrixXd As2;
     Eigen::VectorXd bs;
-    stack(s, As2, bs);
+    stack_split(reg, base, ds, s, As2, bs);
     score(s, As2, bs);
   }
   return out;

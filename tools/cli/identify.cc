@@ -78,21 +78,26 @@ void add_regressor(CLI::App& app) {
 void add_identify(CLI::App& app) {
   auto* cmd = app.add_subcommand("identify", "Identification of an MJCF model on a dataset: base parameters by least squares, "
                                               "or every body and joint term physically consistent");
-  struct Args : ModelArgs { std::string data, split = "train", estimator, write_model; double prior_weight = 1.0; };
+  struct Args : ModelArgs { std::string data, split = "train", estimator, write_model; double prior_weight = 1.0, tracking_hz = 1.0; };
   auto a = std::make_shared<Args>();
   add_model_options(cmd, *a, "MJCF file");
   cmd->add_option("--data,-d", a->data, "spml/1 dataset with q:/qd:/qdd:<joint> inputs and tau:<joint> targets")->required();
   cmd->add_option("--split", a->split, "split to identify on; every other split is scored as held out");
-  cmd->add_option("--estimator", a->estimator, "ls: base parameters by least squares (default); consistent: every body's "
-                  "inertial realizable, joint terms >= 0, prior toward the MJCF (default with --write-model)")
-      ->check(CLI::IsMember({"ls", "consistent"}));
+  cmd->add_option("--estimator", a->estimator, "ls: base parameters by least squares (default); iv: by instrumental variables, "
+                  "the instruments from the model simulated along the data (noisy differentiated accelerations do not shrink "
+                  "the inertias); consistent: every body's inertial realizable, joint terms >= 0, prior toward the MJCF "
+                  "(default with --write-model)")
+      ->check(CLI::IsMember({"ls", "iv", "consistent"}));
+  cmd->add_option("--tracking-hz", a->tracking_hz, "iv: bandwidth of the loop that keeps the simulation on the measured path (default 1)")
+      ->check(finite_number(1e-3, 1e3));
   cmd->add_option("--prior-weight", a->prior_weight, "consistent: weight of the prior toward the MJCF (default 1)")
       ->check(finite_number(1e-6, 1e6));   // the bounds of diagnose's --prior-weight
   cmd->add_option("--write-model", a->write_model, "consistent: write the MJCF with the identified inertials and joint terms here");
   cmd->callback([a, cmd] {
     add_plugin_paths(a->plugin_paths);
-    if (a->estimator == "ls" && !a->write_model.empty())
+    if ((a->estimator == "ls" || a->estimator == "iv") && !a->write_model.empty())
       throw CLI::ValidationError("--write-model", "needs --estimator consistent: base parameters do not define every body");
+    if (a->estimator != "iv" && cmd->count("--tracking-hz")) throw CLI::ValidationError("--tracking-hz", "applies to --estimator iv only");
     const bool consistent = a->estimator == "consistent" || (a->estimator.empty() && !a->write_model.empty());
     if (!consistent && cmd->count("--prior-weight"))
       throw CLI::ValidationError("--prior-weight", "applies to --estimator consistent only");
@@ -103,17 +108,33 @@ void add_identify(CLI::App& app) {
     auto base = reg.base_parameters();
     warn_close_call(base);
     Dataset ds = read_dataset(a->data);
-    Identification id = identify(reg, base, ds, a->split);
-    nlohmann::json j{{"model", a->model}, {"data", a->data}, {"split", a->split}, {"rank_decision", rank_decision_json(base)},
+    IdentifyOptions io;
+    io.estimator = a->estimator == "iv" ? "iv" : "ls";
+    io.mjcf_path = a->model;
+    io.instruments.tracking_hz = a->tracking_hz;
+    Identification id = identify(reg, base, ds, a->split, io);
+    nlohmann::json j{{"model", a->model}, {"data", a->data}, {"split", a->split}, {"estimator", id.estimator},
+                     {"rank_decision", rank_decision_json(base)},
                      {"names", id.names},
                      {"estimate", vec(id.estimate)}, {"std_error", vec(id.std_error)}, {"prior", vec(id.prior)},
                      {"sigma", id.sigma}, {"condition_number", id.condition}};
+    if (id.estimator == "iv") {
+      nlohmann::json tr = nlohmann::json::object();
+      for (size_t k = 0; k < id.joints.size(); ++k) tr[id.joints[k]] = id.tracking_rms[k];
+      j["instruments"] = {{"tracking_hz", a->tracking_hz}, {"tracking_rms", tr}};
+    }
     for (const auto& e : id.errors)
       j["errors"].push_back({{"split", e.split}, {"rows", e.rows}, {"relative_error", e.relative_error}, {"rmse", e.rmse}});
     if (a->json) { std::cout << json_output(j, a->model); return; }
-    std::cout << "identified on '" << a->split << "' of " << a->data << " (condition number " << id.condition
+    std::cout << "identified on '" << a->split << "' of " << a->data << " by "
+              << (id.estimator == "iv" ? "instrumental variables" : "least squares") << " (condition number " << id.condition
               << ", residual std " << id.sigma << ")\n  base parameters: " << rank_decision_text(base, reg.param_names().size())
               << "\n";
+    if (id.estimator == "iv") {
+      std::cout << "  instruments: the model simulated along the data (tracking " << a->tracking_hz << " Hz); RMS position gap";
+      for (size_t k = 0; k < id.joints.size(); ++k) std::cout << " " << id.joints[k] << " " << id.tracking_rms[k];
+      std::cout << "\n";
+    }
     std::cout << "  " << std::setw(12) << "estimate" << " " << std::setw(12) << "std err" << " " << std::setw(12) << "prior" << "  parameter\n";
     for (size_t i = 0; i < id.names.size(); ++i)
       std::cout << "  " << std::setw(12) << id.estimate[i] << " " << std::setw(12) << id.std_error[i] << " " << std::setw(12) << id.prior[i]

@@ -16,6 +16,7 @@
 #include <Eigen/Core>
 
 #include "spml/dataset.h"
+#include "spml/envs/instruments.h"
 #include "spml/envs/mujoco_model.h"
 #include "spml/force_effects.h"
 
@@ -147,18 +148,29 @@ Eigen::MatrixXd stacked_base_regressor(const MjcfRegressor& reg, const MjcfRegre
 // `source` (the dataset file, or "") prefixes the message.
 Eigen::VectorXd stacked_torques(const Split& s, const std::string& source);
 
-// Least-squares identification of base parameters on one split of a dataset whose X has
-// q:/qd:/qdd:<joint> and whose Y has tau:<joint> for every joint of the model.
+// Identification of base parameters on one split of a dataset whose X has q:/qd:/qdd:<joint>
+// and whose Y has tau:<joint> for every joint of the model: least squares ("ls"), or
+// instrumental variables ("iv", IDIM-IV: instruments.h), which stay unbiased when the
+// regressor's inputs are noisy (accelerations differentiated from positions) where least
+// squares shrinks the inertial parameters (errors in variables).
+struct IdentifyOptions {
+  std::string estimator = "ls";   // "ls" or "iv"
+  std::string mjcf_path;          // iv: the model simulated for the instruments
+  InstrumentOptions instruments;
+};
 struct Identification {
+  std::string estimator;
   std::vector<std::string> names;
   Eigen::VectorXd estimate, std_error, prior;
   double sigma = 0;             // residual standard deviation
   double condition = 0;         // of the stacked base regressor
   struct SplitError { std::string split; Eigen::Index rows; double relative_error, rmse; };
   std::vector<SplitError> errors;   // first the identification split, then the others held out
+  std::vector<std::string> joints;  // iv: the model's joints, and per joint the RMS of measured -
+  std::vector<double> tracking_rms; //     simulated position along the instruments' simulation
 };
 
 Identification identify(const MjcfRegressor& reg, const MjcfRegressor::Base& base, const Dataset& ds,
-                        const std::string& split);
+                        const std::string& split, const IdentifyOptions& options = {});
 
 }  // namespace spml
