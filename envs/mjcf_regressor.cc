@@ -301,6 +301,7 @@ Identification identify(const MjcfRegressor& reg, const MjcfRegressor::Base& bas
     const Eigen::MatrixXd cov = scale.cwiseInverse().asDiagonal() * (P * P.transpose()) * scale.cwiseInverse().asDiagonal();
     out.std_error = (out.sigma * out.sigma * cov.diagonal()).cwiseSqrt();
     out.tracking_rms = twin.rms_tracking;
+    out.tracking_hz = twin.tracking_hz;
     out.joints = twin.joints;
   } else {
     out.estimate = scale.cwiseInverse().asDiagonal() * svd.solve(b);

@@ -12,6 +12,7 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <cstdlib>
 #include <fstream>
 #include <iomanip>
 #include <iostream>
@@ -126,6 +127,10 @@ std::vector<Outcome> run_draws() {
   for (size_t l = 0; l < kLevels.size(); ++l) {
     const NoiseLevel& n = kLevels[l];
     for (int i = 0; i < kDrawsPerLevel; ++i) {
+      // SPML_REALISTIC_ONLY=level:draw runs that draw alone (with SPML_KEEP_TEST_FILES, its
+      // models and datasets stay in the temp folder for a look with spml diagnose).
+      if (const char* only = std::getenv("SPML_REALISTIC_ONLY"); only && std::string(only) != std::to_string(l) + ":" + std::to_string(i))
+        continue;
       const Draw d = make_draw(static_cast<int>(l), i, dir);
       MeasurementOptions o;
       o.duration = kDuration;
@@ -140,7 +145,7 @@ std::vector<Outcome> run_draws() {
         const auto start = std::chrono::steady_clock::now();
         DiagnoseOptions opt;
         opt.model = d.user_path;
-        opt.data = condition(run, n, lowpass, (dir / ("d" + std::to_string(l) + "_" + std::to_string(i) + ".h5")).string());
+        opt.data = condition(run, n, lowpass, (dir / ("d" + std::to_string(l) + "_" + std::to_string(i) + (lowpass ? "_lowpass" : "_raw") + ".h5")).string());
         opt.rollouts = 0;
         const auto r = diagnose(opt, "").report;
         Outcome c{n.name, lowpass ? "lowpass+derive" : "raw differences", d.hidden, d.label, "", {}, d.expected, 0};
@@ -215,6 +220,7 @@ const std::vector<Outcome>& outcomes() {
 
 TEST(RealisticDraws, ConfusionTable) {
   const auto& all = outcomes();
+  if (std::getenv("SPML_REALISTIC_ONLY")) GTEST_SKIP() << "SPML_REALISTIC_ONLY: one draw, no bar";
   ASSERT_EQ(all.size(), 2u * kLevels.size() * kDrawsPerLevel);
   // What holds today: through the import path (low-pass + differences) a hidden effect gets a
   // cause on its own joint (or "parameters" for a payload or viscous friction) in all draws but
@@ -232,8 +238,10 @@ TEST(RealisticDraws, ConfusionTable) {
   for (const auto& m : missed) list += "\n  " + m;
   EXPECT_LE(missed.size(), 1u) << missed.size() << " of " << hidden << " hidden effects not located:" << list;
   // Named exactly (issue #20's bar, draw by draw in the pending test): through the low-pass path
-  // 17 of 24 since a Stribeck fit with fs < fc is refused (16 before), raw differences 12 of 24;
-  // clean draws with no cause: 5 of 6 on each path.
+  // 19 of 24 (17 once a Stribeck fit with fs < fc was refused, 18 before `parameters` was
+  // judged by instrumental variables), raw differences 13 of 24 (12 before IV); clean draws
+  // with no cause: 5 of 6 through the low-pass, 6 of 6 on raw differences (5 before IV: least
+  // squares' shrunken inertias named `parameters` on a clean draw).
   std::map<std::string, int> exact, clean_ok;
   for (const auto& o : all) {
     exact[o.path] += o.exact();
@@ -241,10 +249,10 @@ TEST(RealisticDraws, ConfusionTable) {
   }
   std::cout << "named exactly: lowpass+derive " << exact["lowpass+derive"] << "/24, raw differences " << exact["raw differences"]
             << "/24; clean with no cause: " << clean_ok["lowpass+derive"] << "/6, " << clean_ok["raw differences"] << "/6\n";
-  EXPECT_GE(exact["lowpass+derive"], 17);
-  EXPECT_GE(exact["raw differences"], 12);
+  EXPECT_GE(exact["lowpass+derive"], 19);
+  EXPECT_GE(exact["raw differences"], 13);
   EXPECT_GE(clean_ok["lowpass+derive"], 5);
-  EXPECT_GE(clean_ok["raw differences"], 5);
+  EXPECT_GE(clean_ok["raw differences"], 6);
 }
 
 TEST(RealisticDraws, DISABLED_CleanDrawsGiveNoCauseAndEffectsAreNamed) {

@@ -83,6 +83,9 @@ void add_diagnose(CLI::App& app) {
       ->capture_default_str()->check(finite_number(0.0, 1e6));
   cmd->add_option("--ripple-gear", o->ripple_gear, "the drive's gear ratio: ripple is searched at this wavenumber only (0: search)")
       ->capture_default_str()->check(finite_number(0.0, 1e9));
+  cmd->add_option("--estimator", o->estimator, "base parameters whose contradiction of the MJCF names `parameters`: iv (instrumental "
+                  "variables, instruments from the model simulated along the data; default) or ls (least squares)")
+      ->check(CLI::IsMember({"iv", "ls"}));
   cmd->add_option("--prior-weight", o->prior_weight, "weight of the prior toward the MJCF in the consistent fit extended.xml states when parameters are named")
       ->capture_default_str()->check(finite_number(1e-6, 1e6));
   cmd->add_flag("--no-plots", *no_plots, "do not draw plots/ (needs /usr/bin/python3 with matplotlib)");

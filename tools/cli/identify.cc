@@ -78,7 +78,7 @@ void add_regressor(CLI::App& app) {
 void add_identify(CLI::App& app) {
   auto* cmd = app.add_subcommand("identify", "Identification of an MJCF model on a dataset: base parameters by least squares, "
                                               "or every body and joint term physically consistent");
-  struct Args : ModelArgs { std::string data, split = "train", estimator, write_model; double prior_weight = 1.0, tracking_hz = 1.0; };
+  struct Args : ModelArgs { std::string data, split = "train", estimator, write_model; double prior_weight = 1.0, tracking_hz = 0; };
   auto a = std::make_shared<Args>();
   add_model_options(cmd, *a, "MJCF file");
   cmd->add_option("--data,-d", a->data, "spml/1 dataset with q:/qd:/qdd:<joint> inputs and tau:<joint> targets")->required();
@@ -88,8 +88,9 @@ void add_identify(CLI::App& app) {
                   "the inertias); consistent: every body's inertial realizable, joint terms >= 0, prior toward the MJCF "
                   "(default with --write-model)")
       ->check(CLI::IsMember({"ls", "iv", "consistent"}));
-  cmd->add_option("--tracking-hz", a->tracking_hz, "iv: bandwidth of the loop that keeps the simulation on the measured path (default 1)")
-      ->check(finite_number(1e-3, 1e3));
+  cmd->add_option("--tracking-hz", a->tracking_hz, "iv: bandwidth [Hz] of the loop that keeps the simulation on the measured path (default 0: "
+                  "the lowest of 1, 2, 4, ... Hz that keeps each joint within 1 % of its motion)")
+      ->check(finite_number(0, 1e3));
   cmd->add_option("--prior-weight", a->prior_weight, "consistent: weight of the prior toward the MJCF (default 1)")
       ->check(finite_number(1e-6, 1e6));   // the bounds of diagnose's --prior-weight
   cmd->add_option("--write-model", a->write_model, "consistent: write the MJCF with the identified inertials and joint terms here");
@@ -121,7 +122,7 @@ void add_identify(CLI::App& app) {
     if (id.estimator == "iv") {
       nlohmann::json tr = nlohmann::json::object();
       for (size_t k = 0; k < id.joints.size(); ++k) tr[id.joints[k]] = id.tracking_rms[k];
-      j["instruments"] = {{"tracking_hz", a->tracking_hz}, {"tracking_rms", tr}};
+      j["instruments"] = {{"tracking_hz", id.tracking_hz}, {"tracking_rms", tr}};
     }
     for (const auto& e : id.errors)
       j["errors"].push_back({{"split", e.split}, {"rows", e.rows}, {"relative_error", e.relative_error}, {"rmse", e.rmse}});
@@ -131,7 +132,7 @@ void add_identify(CLI::App& app) {
               << ", residual std " << id.sigma << ")\n  base parameters: " << rank_decision_text(base, reg.param_names().size())
               << "\n";
     if (id.estimator == "iv") {
-      std::cout << "  instruments: the model simulated along the data (tracking " << a->tracking_hz << " Hz); RMS position gap";
+      std::cout << "  instruments: the model simulated along the data (tracking " << id.tracking_hz << " Hz); RMS position gap";
       for (size_t k = 0; k < id.joints.size(); ++k) std::cout << " " << id.joints[k] << " " << id.tracking_rms[k];
       std::cout << "\n";
     }

@@ -37,15 +37,25 @@ BlockColumns BlockColumns::from_dense(const Eigen::MatrixXd& M, Eigen::Index row
   return b;
 }
 
-Fit fit_blocks(const std::vector<const BlockColumns*>& blocks, const Eigen::VectorXd& y, bool want_q, Eigen::Index hac_rows_per_output) {
+namespace {
+
+Eigen::MatrixXd dense_of(const std::vector<const BlockColumns*>& blocks, Eigen::Index rows) {
   Eigen::Index cols = 0;
   for (auto* b : blocks) cols += b->cols;
-  Eigen::MatrixXd F(y.size(), cols);
+  Eigen::MatrixXd F(rows, cols);
   Eigen::Index c = 0;
   for (auto* b : blocks) {
     F.middleCols(c, b->cols) = b->dense();
     c += b->cols;
   }
+  return F;
+}
+
+}  // namespace
+
+Fit fit_blocks(const std::vector<const BlockColumns*>& blocks, const Eigen::VectorXd& y, bool want_q, Eigen::Index hac_rows_per_output) {
+  Eigen::MatrixXd F = dense_of(blocks, y.size());
+  const Eigen::Index cols = F.cols();
   Fit fit;
   fit.coef = Eigen::VectorXd::Zero(cols);
   fit.stderr_ = Eigen::VectorXd::Constant(cols, std::numeric_limits<double>::infinity());
@@ -92,6 +102,50 @@ Fit fit_blocks(const std::vector<const BlockColumns*>& blocks, const Eigen::Vect
     fit.determined[static_cast<size_t>(k)] = true;
   }
   if (want_q) fit.Q = std::move(Qfull);
+  return fit;
+}
+
+Fit iv_fit_blocks(const std::vector<const BlockColumns*>& blocks, const std::vector<const BlockColumns*>& inst, const Eigen::VectorXd& y,
+                  Eigen::Index hac_rows_per_output) {
+  Fit fit = fit_blocks(blocks, y, false);
+  std::vector<Eigen::Index> keep;
+  for (size_t k = 0; k < fit.determined.size(); ++k)
+    if (fit.determined[k]) keep.push_back(static_cast<Eigen::Index>(k));
+  if (keep.empty()) return fit;
+  const Eigen::MatrixXd Fall = dense_of(blocks, y.size()), Zall = dense_of(inst, y.size());
+  const auto n = static_cast<Eigen::Index>(keep.size());
+  Eigen::MatrixXd F(y.size(), n), Z(y.size(), n);
+  Eigen::VectorXd scale(n);
+  for (Eigen::Index k = 0; k < n; ++k) {
+    scale[k] = Fall.col(keep[static_cast<size_t>(k)]).norm();
+    scale[k] = scale[k] > 0 ? scale[k] : 1.0;
+    F.col(k) = Fall.col(keep[static_cast<size_t>(k)]) / scale[k];
+    Z.col(k) = Zall.col(keep[static_cast<size_t>(k)]) / scale[k];
+  }
+  const Eigen::PartialPivLU<Eigen::MatrixXd> lu(Z.transpose() * F);
+  const Eigen::VectorXd z = lu.solve(Z.transpose() * y);
+  fit.residual = y - F * z;
+  fit.rss = fit.residual.squaredNorm();
+  const double dof = std::max<double>(1.0, static_cast<double>(y.size() - n));
+  const Eigen::MatrixXd P = lu.solve(Eigen::MatrixXd(Z.transpose())).transpose();   // Z (F^T Z)^-1, as rows
+  Eigen::MatrixXd V;
+  if (hac_rows_per_output > 0) {
+    const Eigen::MatrixXd Zr = Z.array().colwise() * fit.residual.array();
+    const Eigen::MatrixXd Pinv = lu.solve(Eigen::MatrixXd::Identity(n, n));       // (Z^T F)^-1
+    V = Pinv * long_run_covariance(Zr, fit.residual, hac_rows_per_output) * Pinv.transpose() * (static_cast<double>(y.size()) / dof);
+  } else {
+    V = (fit.rss / dof) * P.transpose() * P;
+  }
+  for (Eigen::Index k = 0; k < n; ++k) {
+    const auto c = keep[static_cast<size_t>(k)];
+    fit.coef[c] = z[k] / scale[k];
+    fit.stderr_[c] = std::sqrt(std::max(V(k, k), 0.0)) / scale[k];
+    if (!std::isfinite(fit.coef[c]) || !std::isfinite(fit.stderr_[c])) {   // instruments blind to this column
+      fit.determined[static_cast<size_t>(c)] = false;
+      fit.coef[c] = 0;
+      fit.stderr_[c] = std::numeric_limits<double>::infinity();
+    }
+  }
   return fit;
 }
 

@@ -35,6 +35,15 @@ struct Fit {
 // rows (statistics.h), else the ordinary ones (white residuals).
 Fit fit_blocks(const std::vector<const BlockColumns*>& blocks, const Eigen::VectorXd& y, bool want_q, Eigen::Index hac_rows_per_output = 0);
 
+// The instrumental-variable fit (IDIM-IV, spml/envs/instruments.h) of y on the blocks, with
+// instruments `inst` laid out like them (the same blocks on the model's simulated states):
+// coef = (Z^T F)^-1 Z^T y over the columns least squares determines (the others as in
+// fit_blocks), standard errors the sandwich (Z^T F)^-1 S (F^T Z)^-1, S the long-run
+// covariance of the rows z_i r_i (hac_rows_per_output > 0) or sigma^2 Z^T Z. The residual is
+// y - F coef; no basis Q.
+Fit iv_fit_blocks(const std::vector<const BlockColumns*>& blocks, const std::vector<const BlockColumns*>& inst, const Eigen::VectorXd& y,
+                  Eigen::Index hac_rows_per_output);
+
 // What adding block C to a fit with basis Q and residual r gains: the drop of the residual
 // sum of squares and the number of new independent directions (rank increase).
 struct Gain {

@@ -127,6 +127,8 @@ void DiagnoseOptions::check() const {
   in("min_ripple_periods", min_ripple_periods, 0, 1e6);
   in("ripple_gear", ripple_gear, 0, 1e9);
   in("prior_weight", prior_weight, 1e-6, 1e6);
+  if (estimator != "ls" && estimator != "iv")
+    throw std::invalid_argument("diagnose option estimator: '" + estimator + "' is neither 'iv' nor 'ls'");
   // report.json names every input, and JSON holds only UTF-8: refuse here, naming the option,
   // before anything is read or written.
   auto utf8 = [](const char* name, const std::string& path) {

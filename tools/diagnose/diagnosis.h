@@ -185,13 +185,14 @@ class Diagnosis {
   bool cause_needed(size_t i, const std::vector<size_t>& set) const;
   void eliminate_backward();
   void decide_parameters();
+  Fit iv_refit(const std::vector<int>& causes);
   std::vector<int> kept_effects() const;
   // report_json.cc
   nlohmann::json metrics(const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test) const;
   nlohmann::json per_joint(const Eigen::VectorXd& r, Eigen::Index N) const;
   nlohmann::json cross_errors(const std::vector<int>& causes, bool base_free, const Fit& f) const;
   void build_report(const std::string& out_dir);
-  nlohmann::json parameters_cause(const Fit& final_fit, MjcfEdits& edits, std::vector<std::string>& notes) const;
+  nlohmann::json parameters_cause(MjcfEdits& edits, std::vector<std::string>& notes) const;
   nlohmann::json effect_cause(size_t i, const Fit& final_fit, bool free, MjcfEdits& edits, std::vector<std::string>& notes,
                               nlohmann::json& cross_after) const;
   nlohmann::json cross_report(const Fit& final_fit, bool free, const nlohmann::json& cross_after) const;
@@ -258,6 +259,9 @@ class Diagnosis {
   bool parameters_named_ = false;
   double parameters_delta_bic_ = 0, parameters_n_eff_ = 0;
   int parameters_contradicted_ = 0;
+  Fit parameters_fit_;                  // the free fit whose estimates decide `parameters` (ls or iv)
+  std::string parameters_estimator_;    // "ls" or "iv", as it ran
+  std::unique_ptr<SplitData> twin_;     // iv: the fit split on the model's simulated states
   mutable bool parameters_partial_ = false;   // some re-identified parameter has no MJCF attribute written
   std::optional<WrittenParameters> written_;  // set in build_report when `parameters` is named
   std::vector<std::string> notes_;

@@ -72,15 +72,17 @@ nlohmann::json Diagnosis::cross_errors(const std::vector<int>& causes, bool base
 
 // The `parameters` cause: the base parameters beyond three standard errors of the MJCF's
 // values, and the MJCF edits that carry them.
-nlohmann::json Diagnosis::parameters_cause(const Fit& final_fit, MjcfEdits& edits, std::vector<std::string>& notes) const {
+nlohmann::json Diagnosis::parameters_cause(MjcfEdits& edits, std::vector<std::string>& notes) const {
   const Fit pf = refit({}, true);
   nlohmann::json params = nlohmann::json::object(), se = nlohmann::json::object(), prior = nlohmann::json::object();
   nlohmann::json undetermined = nlohmann::json::array();
   std::set<std::string> joints;
+  // The estimates that decided `parameters` (least squares or instrumental variables).
+  const Fit& est = parameters_fit_;
   for (int i = 0; i < base_.rank; ++i) {
-    const double d = final_fit.coef[i], e = final_fit.stderr_[i];
+    const double d = est.coef[i], e = est.stderr_[i];
     const std::string& name = base_.names[static_cast<size_t>(i)];
-    if (!final_fit.determined[static_cast<size_t>(i)]) {
+    if (!est.determined[static_cast<size_t>(i)]) {
       undetermined.push_back(name);
       continue;
     }
@@ -233,7 +235,8 @@ void Diagnosis::build_report(const std::string& out_dir) {
                           {"why", filter_plan_.description}};
   R["statistics"] = {{"standard_errors", "autocorrelation-robust (batch means, Andrews bandwidth)"},
                      {"equations", fit_.y0.size()}, {"parameters_n_eff", parameters_n_eff_},
-                     {"parameters_delta_bic", parameters_delta_bic_}, {"parameters_contradicted", parameters_contradicted_}};
+                     {"parameters_delta_bic", parameters_delta_bic_}, {"parameters_contradicted", parameters_contradicted_},
+                     {"estimator", {{"parameters", parameters_estimator_.empty() ? "ls" : parameters_estimator_}, {"effects", "ls"}}}};
   const bool free = parameters_named_;
   const Fit final_fit = refit(kept_effects(), free, true);
   const Eigen::VectorXd final_test = residual_on(test_, kept_effects(), free, final_fit);
@@ -246,7 +249,7 @@ void Diagnosis::build_report(const std::string& out_dir) {
   }
   if (free) {
     written_ = consistent_parameters();
-    causes.push_back(parameters_cause(final_fit, edits, notes));
+    causes.push_back(parameters_cause(edits, notes));
     cross_after.push_back(cross_errors({}, true, refit({}, true)));
   }
   for (size_t i = 0; i < causes_.size(); ++i) causes.push_back(effect_cause(i, final_fit, free, edits, notes, cross_after));

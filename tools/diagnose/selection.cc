@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "diagnosis.h"
+#include "spml/envs/instruments.h"
 #include "statistics.h"
 
 namespace spml::diagnose_detail {
@@ -177,16 +178,20 @@ void Diagnosis::eliminate_backward() {
 
 // `parameters`: the evidence (effective sample size of the free fit's residuals) and the test
 // gain must pass, and at least one base parameter must lie beyond three autocorrelation-robust
-// standard errors of the MJCF's value.
+// standard errors of the MJCF's value - estimated by instrumental variables (--estimator iv):
+// least squares on differentiated accelerations shrinks the inertias (errors in variables),
+// a contradiction of the MJCF the data do not hold.
 void Diagnosis::decide_parameters() {
   const std::vector<int> effects = kept_effects();
   const Fit free = refit(effects, true, true), fixed = refit(effects, false);
   const double n = static_cast<double>(fit_.y0.size());
   parameters_n_eff_ = n * effective_fraction(free.residual, fit_.N);
   parameters_delta_bic_ = delta_bic(parameters_n_eff_, fixed.rss, free.rss, free.rank - fixed.rank, rss_floor(fit_.b));
+  parameters_fit_ = opt_.estimator == "iv" ? iv_refit(effects) : free;
   parameters_contradicted_ = 0;
   for (int i = 0; i < base_.rank; ++i)
-    parameters_contradicted_ += free.determined[static_cast<size_t>(i)] && std::fabs(free.coef[i]) > 3 * free.stderr_[i];
+    parameters_contradicted_ += parameters_fit_.determined[static_cast<size_t>(i)] &&
+                                std::fabs(parameters_fit_.coef[i]) > 3 * parameters_fit_.stderr_[i];
   const bool evidence = parameters_delta_bic_ > opt_.bic_threshold &&
                         gains_on_test(residual_on(test_, effects, false, fixed).squaredNorm(),
                                       residual_on(test_, effects, true, free).squaredNorm(), opt_.min_gain, rss_floor(test_.b));
@@ -194,6 +199,29 @@ void Diagnosis::decide_parameters() {
   if (evidence && !parameters_named_)
     notes_.push_back("refitting the base parameters passes the evidence and test thresholds, but none lies beyond three "
                      "autocorrelation-robust standard errors of the MJCF's value: `parameters` is not named");
+}
+
+// The free fit of the base parameters and `causes` by instrumental variables; the instruments
+// (the fit split on the model's simulated states, prepared and filtered like the fit split)
+// are simulated once. Falls back to least squares, said in the notes, when the model cannot
+// be simulated along the data (no time stamps, divergence).
+Fit Diagnosis::iv_refit(const std::vector<int>& causes) {
+  if (!twin_ && parameters_estimator_.empty()) {
+    try {
+      twin_ = std::make_unique<SplitData>(prepare(simulated_twin(opt_.model, fit_.split, fit_.runs).split, fit_.runs));
+      parameters_estimator_ = "iv";
+    } catch (const std::exception& e) {
+      notes_.push_back(std::string("the instrumental-variable estimator could not simulate the model along the data (") + e.what() +
+                       "): `parameters` is decided by least squares");
+      parameters_estimator_ = "ls";
+    }
+  }
+  if (!twin_) return refit(causes, true, true);
+  std::vector<BlockColumns> zs;
+  zs.reserve(causes.size());
+  std::vector<const BlockColumns*> inst{&twin_->base};
+  for (int c : causes) inst.push_back(&zs.emplace_back(columns_of(cands_[static_cast<size_t>(c)], *twin_)));
+  return iv_fit_blocks(blocks(causes, true), inst, fit_.y0, fit_.N);
 }
 
 }  // namespace spml::diagnose_detail

@@ -6,7 +6,7 @@
 // The paper drives the simulation with the robot's own reference and controller. A log holds
 // neither, so here the model is driven by the measured torques, and a weak tracking loop
 // (M(q) * (w^2 e + 2 w e'), e = measured - simulated position) keeps it on the measured path
-// against drift and model error. The simulated acceleration then carries the torque noise
+// against drift and model error (the gap falls as 1/w^2). The simulated acceleration then carries the torque noise
 // through M^-1 (a bias of the order of the squared relative torque noise, 1e-4 at 1 %), and
 // the measured position noise only through the loop's low gain; the acceleration noise of
 // differentiated positions, which grows with the sampling rate squared, not at all.
@@ -20,7 +20,10 @@
 namespace spml {
 
 struct InstrumentOptions {
-  double tracking_hz = 1.0;   // bandwidth of the tracking loop (critically damped)
+  // Bandwidth of the tracking loop (critically damped) [Hz]; 0: the lowest of 1, 2, 4, ... Hz
+  // (at most a tenth of the sampling rate) that keeps every joint's RMS gap within 1 % of
+  // the joint's own RMS motion.
+  double tracking_hz = 0;
 };
 
 struct SimulatedTwin {
@@ -28,6 +31,7 @@ struct SimulatedTwin {
   std::vector<std::string> joints;      // the model's joints
   std::vector<double> rms_tracking;     // per joint: RMS of measured - simulated position
   int records = 0;                      // stretches simulated from their own first row
+  double tracking_hz = 0;               // the bandwidth used
 };
 
 // Simulates the MJCF (contacts off, its force plugins attached) along split s, which needs

@@ -168,6 +168,7 @@ struct Identification {
   std::vector<SplitError> errors;   // first the identification split, then the others held out
   std::vector<std::string> joints;  // iv: the model's joints, and per joint the RMS of measured -
   std::vector<double> tracking_rms; //     simulated position along the instruments' simulation
+  double tracking_hz = 0;           // iv: the tracking loop's bandwidth
 };
 
 Identification identify(const MjcfRegressor& reg, const MjcfRegressor::Base& base, const Dataset& ds,

@@ -60,6 +60,10 @@ struct DiagnoseOptions {
   // (Panda: with 1, link2 0.65 -> 5.5 kg and 0.1 s rollouts worse on joints 5-7; with 100
   // masses stay near the MJCF's and only joint 6 is worse, at the same held-out torque error).
   double prior_weight = 100;
+  // Estimator of the base parameters whose contradiction of the MJCF names `parameters`:
+  // "iv" (instrumental variables, instruments from the model simulated along the fit split:
+  // spml/envs/instruments.h) or "ls" (least squares). Causes are selected by least squares.
+  std::string estimator = "iv";
 
   // Throws std::invalid_argument naming the first option out of its range (every number must
   // be finite; holdout in [0.05, 0.9], min_gain in [0, 1], ...). diagnose() calls it first.
