@@ -220,7 +220,7 @@ void Diagnosis::build_report(const std::string& out_dir) {
   R["joint_units"] = units;
   R["rows"] = {{"fit", fit_.N}, {"test", test_.N}};
   R["settings"] = {{"bic_threshold", opt_.bic_threshold}, {"min_gain", opt_.min_gain}, {"max_causes", opt_.max_causes},
-                   {"still_speed", opt_.still_speed}, {"candidates", cands_.size()}};
+                   {"still_speed", opt_.still_speed}, {"estimator", opt_.estimator}, {"candidates", cands_.size()}};
   R["base_parameters"] = {{"standard", reg_->param_names().size()}, {"rank", base_.rank},
                           {"tolerance", base_.tolerance}, {"smallest_kept", base_.smallest_kept},
                           {"largest_dropped", base_.largest_dropped}, {"close_call", base_.close_call()}};

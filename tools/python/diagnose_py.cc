@@ -44,7 +44,7 @@ void bind_diagnose(pb::module_& m) {
       "diagnose",
       [](const std::string& model, const std::string& data, const std::string& out, const std::string& fit_split,
          const std::string& test_split, double holdout, double bic_threshold, double min_gain, int max_causes,
-         double still_speed, double rollout_seconds, int rollouts, const std::vector<std::string>& cross,
+         double still_speed, double rollout_seconds, int rollouts, const std::string& estimator, const std::vector<std::string>& cross,
          const std::vector<std::string>& plugin_path) {
         DiagnoseOptions o;
         o.fit_split = fit_split;
@@ -56,6 +56,7 @@ void bind_diagnose(pb::module_& m) {
         o.still_speed = still_speed;
         o.rollout_seconds = rollout_seconds;
         o.rollouts = rollouts;
+        o.estimator = estimator;
         o.cross = cross;
         return run(model, data, out, o, plugin_path);
       },
@@ -63,7 +64,7 @@ void bind_diagnose(pb::module_& m) {
       pb::arg("holdout") = d.holdout, pb::arg("bic_threshold") = d.bic_threshold, pb::arg("min_gain") = d.min_gain,
       pb::arg("max_causes") = d.max_causes, pb::arg("still_speed") = d.still_speed,
       pb::arg("rollout_seconds") = d.rollout_seconds, pb::arg("rollouts") = d.rollouts,
-      pb::arg("cross") = std::vector<std::string>{}, pb::arg("plugin_path") = std::vector<std::string>{});
+      pb::arg("estimator") = d.estimator, pb::arg("cross") = std::vector<std::string>{}, pb::arg("plugin_path") = std::vector<std::string>{});
 }
 
 }  // namespace spml::py

@@ -106,7 +106,7 @@ def diagnose(model, data, out=None, cross=(), plugin_path=(), **options):
     report.json, report.md, extended.xml and series.csv there as the command does (the plots
     are drawn by `spml diagnose`, not here). Options as the command's, with underscores:
     fit_split, test_split, holdout, bic_threshold, min_gain, max_causes, still_speed,
-    rollout_seconds, rollouts."""
+    rollout_seconds, rollouts, estimator ("iv" or "ls")."""
     return _spml.diagnose(os.fspath(model), os.fspath(data), "" if out is None else os.fspath(out),
                           cross=[os.fspath(c) for c in cross], plugin_path=[os.fspath(p) for p in plugin_path],
                           **options)
