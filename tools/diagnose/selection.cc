@@ -121,14 +121,20 @@ void Diagnosis::select() {
   result_.timings.refits += since(t0);
 }
 
-// The candidate's evidence again, with the effective sample size of the larger fit's residuals
-// (statistics.h): the ranking used every row as independent, which filtered or autocorrelated
-// residuals are not.
+// The candidate's evidence again, on the outputs it acts on, with the effective sample size
+// of the larger fit's residuals there (statistics.h): the ranking used every row of every
+// joint as independent, which filtered or autocorrelated residuals are not, and a joint whose
+// residual is smoother than the others' was credited with their white rows (a clean 7-joint
+// chain had a 0.2 N m ripple named on j0 at Delta BIC 359 whose amplitudes lay within 3
+// robust standard errors of 0).
 bool Diagnosis::evidence_holds(int candidate, const Fit& smaller, const Fit& larger) const {
   const Candidate& c = cands_[static_cast<size_t>(candidate)];
-  const double n_eff = static_cast<double>(fit_.y0.size()) * effective_fraction(larger.residual, fit_.N);
+  const std::vector<int> outs = outputs_of(candidate);
+  Eigen::VectorXd r(static_cast<Eigen::Index>(outs.size()) * fit_.N);
+  for (size_t k = 0; k < outs.size(); ++k) r.segment(static_cast<Eigen::Index>(k) * fit_.N, fit_.N) = larger.residual.segment(outs[k] * fit_.N, fit_.N);
+  const double n_eff = static_cast<double>(r.size()) * effective_fraction(r, fit_.N);
   const double dk = larger.rank - smaller.rank + static_cast<double>(c.shape.size());
-  return delta_bic(n_eff, smaller.rss, larger.rss, dk, rss_floor(fit_.b)) > opt_.bic_threshold;
+  return delta_bic(n_eff, rss_on(smaller.residual, outs, fit_.N), rss_on(larger.residual, outs, fit_.N), dk, rss_floor(fit_.b)) > opt_.bic_threshold;
 }
 
 // Is cause i still needed among the causes `set` (indices into causes_, i's included)?
