@@ -121,6 +121,18 @@ bool mjcf_angles_in_degrees(const std::string& model_path) {
   return degrees;
 }
 
+std::vector<std::string> mjcf_defined_joints(const std::string& model_path) {
+  tinyxml2::XMLDocument doc;
+  XMLElement* root = load_mujoco(doc, model_path);
+  std::vector<std::string> out;
+  for (XMLElement* w = root->FirstChildElement("worldbody"); w; w = w->NextSiblingElement("worldbody"))
+    visit(w, [&](XMLElement* e) {
+      const char* n = e->Attribute("name");
+      if (n && std::string(e->Name()) == "joint") out.push_back(n);
+    });
+  return out;
+}
+
 std::string edit_mjcf(const std::string& model_path, const MjcfEdits& edits, std::vector<std::string>& notes) {
   tinyxml2::XMLDocument doc;
   XMLElement* root = load_mujoco(doc, model_path);

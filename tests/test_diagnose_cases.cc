@@ -166,7 +166,8 @@ TEST(DiagnoseCases, SpringAndViscousAreWrittenAsMuJoCosOwnAttributes) {
                {"spml.plugin.diagnosed_viscous_b", "type=viscous joints=b fv=-0.5"},   // 0.2 - 0.5 < 0
                {"spml.plugin.diagnosed_coulomb_b", "type=coulomb joints=b fc=0.3"}};
     ModelPtr given = load_mjcf(model);
-    const diagnose_detail::WrittenForm w = diagnose_detail::mujoco_form(given.get(), degrees, e);
+    EXPECT_EQ(mjcf_defined_joints(model), (std::vector<std::string>{"a", "b", "c"}));
+    const diagnose_detail::WrittenForm w = diagnose_detail::mujoco_form(given.get(), degrees, {"a", "b", "c"}, e);
     ASSERT_EQ(w.edits.texts.size(), 2u);
     EXPECT_EQ(w.edits.texts[0].first, "spml.plugin.diagnosed_viscous_b");
     EXPECT_EQ(w.edits.texts[1].first, "spml.plugin.diagnosed_coulomb_b");
@@ -198,7 +199,30 @@ TEST(DiagnoseCases, SpringAndViscousAreWrittenAsMuJoCosOwnAttributes) {
       fr.compute(dr.get(), b.data());
       EXPECT_LT((a - b).norm(), 1e-12) << a.transpose() << " vs " << b.transpose();
     }
+    // A joint the file does not define itself (an included file) keeps its declarations.
+    const diagnose_detail::WrittenForm included = diagnose_detail::mujoco_form(given.get(), degrees, {"b", "c"}, e);
+    EXPECT_EQ(included.edits.texts.size(), 4u);
+    EXPECT_EQ(included.as_mjcf.size(), 1u);   // the spring on c
+    EXPECT_NE(included.kept_why.at("type=spring joints=a k=3 f0=0.4").find("not defined in the model file itself"), std::string::npos);
   }
+}
+
+// A spring pulls back to its rest position (k > 0). Exact data of the chain with a force that
+// pushes away from q = 0 (the spring plugin with k < 0: what an unmodelled gravity or errors in
+// the derived states can leave in the q column) get no `spring` named: the fit with k < 0 is
+// refused (before the rule, `spring` with the negative k was named).
+TEST(DiagnoseCases, NegativeStiffnessIsNoSpring) {
+  const auto dir = test::temp_dir("dc-antispring");
+  const Case c = make_case(dir);
+  const std::string truth = (dir / "truth.xml").string();
+  std::ofstream(truth) << test::with_declarations(test::read_file(c.model), {"type=spring joints=j1 k=-3 f0=0.2"});
+  write_dataset(c.data, test::exact_dataset(truth, c.joints, 800, 1e-3, 5));
+  DiagnoseOptions o;
+  o.model = c.model;
+  o.data = c.data;
+  o.rollouts = 0;
+  const nlohmann::json r = diagnose(o, "").report;
+  for (const auto& cause : r["causes"]) EXPECT_NE(cause["effect"], "spring") << r["causes"].dump();
 }
 
 TEST(DiagnoseCases, AllZeroTorquesAreRefused) {

@@ -124,8 +124,9 @@ struct WrittenForm {
 // The edits with every diagnosed spring (stiffness k > 0 in total) and viscous declaration
 // (damping >= 0 in total) on a hinge or slide joint of m turned into that joint's attributes, on
 // top of what the edits already write there or else m's own values; `degrees`: the file states
-// hinge angles in degrees (springref is written in them).
-WrittenForm mujoco_form(const mjModel* m, bool degrees, const MjcfEdits& edits);
+// hinge angles in degrees (springref is written in them); `defined`: the joints the file itself
+// defines (others keep their declarations: their attributes cannot be written).
+WrittenForm mujoco_form(const mjModel* m, bool degrees, const std::vector<std::string>& defined, const MjcfEdits& edits);
 
 // "effect@joint" (or "parameters") of every cause rejected in simulation (confirm.cc).
 nlohmann::json rejected_causes(const nlohmann::json& causes);
@@ -282,6 +283,7 @@ class Diagnosis {
   FilterPlan filter_plan_;
   DelayResult delay_;   // #22
   mutable std::optional<bool> degrees_;   // the model file's hinge angles in degrees (written_form.cc)
+  mutable std::optional<std::vector<std::string>> defined_joints_;   // the joints the model file itself defines (written_form.cc)
   mutable std::shared_ptr<mjData> sim_data_;   // #22: the state the stateful simulations read (one thread)
   std::deque<spml_shape_param> synthesized_;   // #22: the level keys of stateful plugins, searched as shapes
 };

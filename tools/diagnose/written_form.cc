@@ -7,6 +7,7 @@
 // plugin declarations; they are turned into joint attributes only here, as the file is written,
 // on top of whatever the edits already write on that joint (the `parameters` cause's damping or
 // stiffness) or else the MJCF's own values.
+#include <algorithm>
 #include <cmath>
 
 #include "diagnosis.h"
@@ -14,7 +15,7 @@
 
 namespace spml::diagnose_detail {
 
-WrittenForm mujoco_form(const mjModel* m, bool degrees, const MjcfEdits& edits) {
+WrittenForm mujoco_form(const mjModel* m, bool degrees, const std::vector<std::string>& defined, const MjcfEdits& edits) {
   WrittenForm w;
   w.edits = edits;
   w.edits.texts.clear();
@@ -29,7 +30,12 @@ WrittenForm mujoco_form(const mjModel* m, bool degrees, const MjcfEdits& edits) 
         else if (const auto number = parse_number(v)) value[key] = *number;
       }
     const int j = joint.empty() ? -1 : mj_name2id(m, mjOBJ_JOINT, joint.c_str());
-    const bool hinge_or_slide = j >= 0 && (m->jnt_type[j] == mjJNT_HINGE || m->jnt_type[j] == mjJNT_SLIDE);
+    bool hinge_or_slide = j >= 0 && (m->jnt_type[j] == mjJNT_HINGE || m->jnt_type[j] == mjJNT_SLIDE);
+    if (hinge_or_slide && (type == "viscous" || type == "spring") && std::find(defined.begin(), defined.end(), joint) == defined.end()) {
+      w.kept_why[data] = "joint '" + joint + "' is not defined in the model file itself (an included file?), so its attributes cannot be "
+                         "written: written as the plugin declaration";
+      hinge_or_slide = false;
+    }
     auto attributes = w.edits.joint_attributes.find(joint);
     auto current = [&](const std::string& attr, double model_value) {
       if (attributes != w.edits.joint_attributes.end())
@@ -70,7 +76,8 @@ WrittenForm mujoco_form(const mjModel* m, bool degrees, const MjcfEdits& edits) 
 
 WrittenForm Diagnosis::written_form(const MjcfEdits& edits) const {
   if (!degrees_) degrees_ = mjcf_angles_in_degrees(opt_.model);
-  return mujoco_form(reg_->model(), *degrees_, edits);
+  if (!defined_joints_) defined_joints_ = mjcf_defined_joints(opt_.model);
+  return mujoco_form(reg_->model(), *degrees_, *defined_joints_, edits);
 }
 
 std::string Diagnosis::write_model(const MjcfEdits& edits, std::vector<std::string>& notes) const {

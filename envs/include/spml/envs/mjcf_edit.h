@@ -42,4 +42,8 @@ std::string edit_mjcf(const std::string& model_path, const MjcfEdits& edits, std
 // compiler is not read). Throws like edit_mjcf when the file is not an MJCF.
 bool mjcf_angles_in_degrees(const std::string& model_path);
 
+// The joints the file itself defines under <worldbody> (the ones edit_mjcf can give attributes;
+// not those of an included file).
+std::vector<std::string> mjcf_defined_joints(const std::string& model_path);
+
 }  // namespace spml
