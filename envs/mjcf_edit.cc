@@ -101,14 +101,41 @@ void set_inertial(tinyxml2::XMLDocument& doc, XMLElement* body, const MjcfEdits:
   body->InsertFirstChild(e);
 }
 
-}  // namespace
-
-std::string edit_mjcf(const std::string& model_path, const MjcfEdits& edits, std::vector<std::string>& notes) {
-  tinyxml2::XMLDocument doc;
+XMLElement* load_mujoco(tinyxml2::XMLDocument& doc, const std::string& model_path) {
   if (doc.LoadFile(model_path.c_str()) != tinyxml2::XML_SUCCESS)
     throw std::runtime_error(model_path + ": cannot read it as XML: " + std::string(doc.ErrorStr()));
   XMLElement* root = doc.RootElement();
   if (!root || std::string(root->Name()) != "mujoco") throw std::runtime_error(model_path + ": the root element is not <mujoco>");
+  return root;
+}
+
+}  // namespace
+
+bool mjcf_angles_in_degrees(const std::string& model_path) {
+  tinyxml2::XMLDocument doc;
+  bool degrees = true;   // MuJoCo's default
+  visit(load_mujoco(doc, model_path), [&](XMLElement* e) {
+    const char* angle = std::string(e->Name()) == "compiler" ? e->Attribute("angle") : nullptr;
+    if (angle) degrees = std::string(angle) != "radian";
+  });
+  return degrees;
+}
+
+std::vector<std::string> mjcf_defined_joints(const std::string& model_path) {
+  tinyxml2::XMLDocument doc;
+  XMLElement* root = load_mujoco(doc, model_path);
+  std::vector<std::string> out;
+  for (XMLElement* w = root->FirstChildElement("worldbody"); w; w = w->NextSiblingElement("worldbody"))
+    visit(w, [&](XMLElement* e) {
+      const char* n = e->Attribute("name");
+      if (n && std::string(e->Name()) == "joint") out.push_back(n);
+    });
+  return out;
+}
+
+std::string edit_mjcf(const std::string& model_path, const MjcfEdits& edits, std::vector<std::string>& notes) {
+  tinyxml2::XMLDocument doc;
+  XMLElement* root = load_mujoco(doc, model_path);
   if (!edits.inertials.empty()) check_compiler(root, model_path);
   absolute_paths(root, fs::absolute(fs::path(model_path)).parent_path());
   for (const auto& [joint, attrs] : edits.joint_attributes) {

@@ -11,6 +11,7 @@
 #include "spml/envs/mjcf_edit.h"
 #include "spml/diagnose.h"
 #include "spml/envs/mujoco_model.h"
+#include "spml/force_effects.h"
 #include "test_util.h"
 
 namespace spml {
@@ -138,6 +139,90 @@ TEST(DiagnoseCases, ExtendedModelOfUnusualLegalMjcfLoads) {
   ASSERT_NE(eq, std::string::npos);
   EXPECT_EQ(out.find("damping", eq), std::string::npos) << "the equality element got the joint's attribute:\n" << out;
   EXPECT_EQ(load_error(dir, out), "") << out;
+}
+
+// Issue #20 item 6: a diagnosed spring is written as the joint's stiffness and springref, viscous
+// friction as its damping - on top of what the joint already has (the MJCF's stiffness and rest
+// position in degrees, the `parameters` cause's damping) - and the written file's MuJoCo passive
+// force equals the model with the plugin declarations; a viscous term that would make the damping
+// negative stays a declaration, and so does every other effect.
+TEST(DiagnoseCases, SpringAndViscousAreWrittenAsMuJoCosOwnAttributes) {
+  const auto dir = test::temp_dir("dc-native");
+  for (const bool degrees : {true, false}) {
+    const double ra = 0.17;   // joint a's own rest position [rad]
+    const std::string model = (dir / (degrees ? "deg.xml" : "rad.xml")).string();
+    std::ofstream(model) << "<mujoco>" << (degrees ? "" : "<compiler angle=\"radian\"/>") << "<option gravity=\"0 0 0\"/><worldbody>\n"
+                            "  <body name=\"A\"><joint name=\"a\" type=\"hinge\" axis=\"0 0 1\" damping=\"0.5\" stiffness=\"2\" springref=\""
+                         << test::num(degrees ? ra * 180 / M_PI : ra) << "\"/><inertial pos=\"0 0 0\" mass=\"1\" diaginertia=\"1 1 1\"/></body>\n"
+                            "  <body name=\"B\"><joint name=\"b\" type=\"hinge\" axis=\"0 0 1\" damping=\"0.2\"/><inertial pos=\"0 0 0\" mass=\"1\" diaginertia=\"1 1 1\"/></body>\n"
+                            "  <body name=\"C\"><joint name=\"c\" type=\"slide\" axis=\"1 0 0\" damping=\"0.3\"/><inertial pos=\"0 0 0\" mass=\"1\" diaginertia=\"1 1 1\"/></body>\n"
+                            "</worldbody></mujoco>\n";
+    EXPECT_EQ(mjcf_angles_in_degrees(model), degrees);
+    MjcfEdits e;
+    e.joint_attributes["a"]["damping"] = 0.9;   // what a `parameters` cause writes
+    e.texts = {{"spml.plugin.diagnosed_spring_a", "type=spring joints=a k=3 f0=0.4"},
+               {"spml.plugin.diagnosed_viscous_a", "type=viscous joints=a fv=0.7"},
+               {"spml.plugin.diagnosed_spring_c", "type=spring joints=c k=5 f0=-0.5"},
+               {"spml.plugin.diagnosed_viscous_b", "type=viscous joints=b fv=-0.5"},   // 0.2 - 0.5 < 0
+               {"spml.plugin.diagnosed_coulomb_b", "type=coulomb joints=b fc=0.3"}};
+    ModelPtr given = load_mjcf(model);
+    EXPECT_EQ(mjcf_defined_joints(model), (std::vector<std::string>{"a", "b", "c"}));
+    const diagnose_detail::WrittenForm w = diagnose_detail::mujoco_form(given.get(), degrees, {"a", "b", "c"}, e);
+    ASSERT_EQ(w.edits.texts.size(), 2u);
+    EXPECT_EQ(w.edits.texts[0].first, "spml.plugin.diagnosed_viscous_b");
+    EXPECT_EQ(w.edits.texts[1].first, "spml.plugin.diagnosed_coulomb_b");
+    EXPECT_EQ(w.as_mjcf.size(), 3u);
+    EXPECT_NE(w.kept_why.at("type=viscous joints=b fv=-0.5").find("< 0"), std::string::npos);
+    std::vector<std::string> notes;
+    const auto written_path = dir / (degrees ? "deg_written.xml" : "rad_written.xml"), reference_path = dir / (degrees ? "deg_ref.xml" : "rad_ref.xml");
+    std::ofstream(written_path) << edit_mjcf(model, w.edits, notes);
+    std::ofstream(reference_path) << edit_mjcf(model, e, notes);   // every effect as its plugin
+    EXPECT_TRUE(notes.empty());
+    ModelPtr mw = load_mjcf(written_path.string()), mr = load_mjcf(reference_path.string());
+    EXPECT_DOUBLE_EQ(mw->dof_damping[0], 0.9 + 0.7);
+    EXPECT_DOUBLE_EQ(mw->dof_damping[1], 0.2);
+    EXPECT_DOUBLE_EQ(mw->jnt_stiffness[0], 2 + 3.0);
+    EXPECT_NEAR(given->qpos_spring[0], ra, 1e-12);
+    EXPECT_NEAR(mw->qpos_spring[0], (2 * given->qpos_spring[0] + 0.4) / 5, 1e-15);
+    EXPECT_DOUBLE_EQ(mw->jnt_stiffness[2], 5.0);
+    EXPECT_NEAR(mw->qpos_spring[2], -0.5 / 5, 1e-15);   // a slide joint: metres, never converted
+    // The same passive force: MuJoCo's own plus the declared plugins, at a few states.
+    ForceEffects fw(mw.get(), written_path.string()), fr(mr.get(), reference_path.string());
+    DataPtr dw = make_data(mw.get()), dr = make_data(mr.get());
+    for (int s = 0; s < 4; ++s) {
+      for (mjData* d : {dw.get(), dr.get()})
+        for (int i = 0; i < 3; ++i) d->qpos[i] = std::sin(1.3 * s + i), d->qvel[i] = std::cos(0.7 * s - i);
+      mj_forward(mw.get(), dw.get());
+      mj_forward(mr.get(), dr.get());
+      Eigen::Vector3d a = Eigen::Map<Eigen::Vector3d>(dw->qfrc_passive), b = Eigen::Map<Eigen::Vector3d>(dr->qfrc_passive);
+      fw.compute(dw.get(), a.data());
+      fr.compute(dr.get(), b.data());
+      EXPECT_LT((a - b).norm(), 1e-12) << a.transpose() << " vs " << b.transpose();
+    }
+    // A joint the file does not define itself (an included file) keeps its declarations.
+    const diagnose_detail::WrittenForm included = diagnose_detail::mujoco_form(given.get(), degrees, {"b", "c"}, e);
+    EXPECT_EQ(included.edits.texts.size(), 4u);
+    EXPECT_EQ(included.as_mjcf.size(), 1u);   // the spring on c
+    EXPECT_NE(included.kept_why.at("type=spring joints=a k=3 f0=0.4").find("not defined in the model file itself"), std::string::npos);
+  }
+}
+
+// A spring pulls back to its rest position (k > 0). Exact data of the chain with a force that
+// pushes away from q = 0 (the spring plugin with k < 0: what an unmodelled gravity or errors in
+// the derived states can leave in the q column) get no `spring` named: the fit with k < 0 is
+// refused (before the rule, `spring` with the negative k was named).
+TEST(DiagnoseCases, NegativeStiffnessIsNoSpring) {
+  const auto dir = test::temp_dir("dc-antispring");
+  const Case c = make_case(dir);
+  const std::string truth = (dir / "truth.xml").string();
+  std::ofstream(truth) << test::with_declarations(test::read_file(c.model), {"type=spring joints=j1 k=-3 f0=0.2"});
+  write_dataset(c.data, test::exact_dataset(truth, c.joints, 800, 1e-3, 5));
+  DiagnoseOptions o;
+  o.model = c.model;
+  o.data = c.data;
+  o.rollouts = 0;
+  const nlohmann::json r = diagnose(o, "").report;
+  for (const auto& cause : r["causes"]) EXPECT_NE(cause["effect"], "spring") << r["causes"].dump();
 }
 
 TEST(DiagnoseCases, AllZeroTorquesAreRefused) {

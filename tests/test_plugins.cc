@@ -77,6 +77,12 @@ TEST(ForcePlugins, ClosedForms) {
   Loaded o(decl("bias", "type=offset joints=b c=-1.5"));
   EXPECT_EQ(o.force(3, 3, 3, 3), Eigen::Vector2d(0, -1.5));
 
+  Loaded sp(decl("spr", "type=spring joints=b k=3 f0=0.6"));
+  EXPECT_NEAR(sp.force(1, 0.5, 2, 2)[1], -3 * 0.5 + 0.6, 1e-15);
+  EXPECT_EQ(sp.force(1, 0.5, 2, 2)[0], 0.0);
+  sp.expect_regressor_consistent(1, 0.5, 2, 2);
+  EXPECT_EQ(sp.fx->param_names(), (std::vector<std::string>{"spr.b.k", "spr.b.f0"}));
+
   Loaded s(decl("str", "type=stribeck joints=a fc=1 fs=3 vs=0.1"));
   double v0 = 0.05, expect = -(1 + 2 * std::exp(-0.25));
   EXPECT_NEAR(s.force(0, 0, v0, 0)[0], expect, 1e-14);
@@ -190,11 +196,32 @@ TEST(ForcePlugins, DispatchIsPerModel) {
   EXPECT_DOUBLE_EQ(one.d->qfrc_passive[0], 1.0);
 }
 
+// The spring plugin is MuJoCo's joint spring: stiffness k with springref f0/k (in degrees for a
+// hinge under MuJoCo's default compiler angle) gives the same passive force as k, f0.
+TEST(ForcePlugins, SpringIsMuJoCosJointStiffness) {
+  const double k = 7.5, r = 0.3;   // rest position [rad]
+  auto dir = test::temp_dir("plugins");
+  auto path = (dir / "stiff.xml").string();
+  std::ofstream(path) << R"(<mujoco model="stiff"><option gravity="0 0 0"/><worldbody>
+    <body name="A"><joint name="a" type="hinge" axis="0 0 1" stiffness=")" << test::num(k) << R"(" springref=")"
+                      << test::num(r * 180 / M_PI) << R"("/><inertial pos="0 0 0" mass="1" diaginertia="1 1 1"/></body>
+    <body name="B"><joint name="b" type="hinge" axis="0 0 1"/><inertial pos="0 0 0" mass="1" diaginertia="1 1 1"/></body>
+  </worldbody></mujoco>)";
+  ModelPtr m = load_mjcf(path);
+  DataPtr d = make_data(m.get());
+  Loaded sp(decl("spr", "type=spring joints=a k=" + test::num(k) + " f0=" + test::num(k * r)));
+  for (double q : {-1.2, 0.0, 0.3, 0.9}) {
+    d->qpos[0] = q;
+    mj_forward(m.get(), d.get());
+    EXPECT_NEAR(d->qfrc_passive[0], sp.force(q, 0, 0, 0)[0], 1e-9) << q;
+  }
+}
+
 TEST(ForcePlugins, BadDeclarationsNameTheElement) {
   const std::string el = "<custom><text name=\"spml.plugin.x\">";
   struct Case { std::string data, message; };
   std::vector<Case> cases = {
-      {"type=no_such_plugin joints=a", "unknown force plugin 'no_such_plugin' (available: asymmetric_friction, coulomb, friction_band, offset, ripple, stick_slip, stribeck, viscous"},
+      {"type=no_such_plugin joints=a", "unknown force plugin 'no_such_plugin' (available: asymmetric_friction, coulomb, friction_band, offset, ripple, spring, stick_slip, stribeck, viscous"},
       {"type=coulomb joints=a fc=1 lvl=2", "unknown key 'lvl' for plugin 'coulomb' (accepted: type, joints, fc, smooth)"},
       {"type=coulomb joints=a fc=abc", "plugin 'coulomb': key 'fc': 'abc' is not a comma-separated list of finite numbers"},
       {"type=coulomb joints=a", "plugin 'coulomb': missing required key 'fc'"},

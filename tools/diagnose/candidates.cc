@@ -202,6 +202,13 @@ std::string Diagnosis::refused(int candidate, const Eigen::VectorXd& theta) cons
     for (Eigen::Index k = 0; k + 1 < theta.size(); k += 2)
       if (!(theta[k + 1] >= theta[k]))
         return "fs " + fmt(theta[k + 1]) + " < fc " + fmt(theta[k]) + ": not a Stribeck curve (friction lower at low speed: stick phases)";
+  // A spring pulls the joint back to its rest position: stiffness k > 0 (MuJoCo's `stiffness`,
+  // which extended.xml writes it as, is >= 0). Fitted with k <= 0 the q column is spent on
+  // something else (gravity the base parameters leave, errors of the derived states).
+  if (std::string(c.plugin->name) == "spring")
+    for (Eigen::Index k = 0; k + 1 < theta.size(); k += 2)
+      if (!(theta[k] > 0))
+        return "k " + fmt(theta[k]) + " <= 0: not a spring (a negative stiffness pushes the joint away from its rest position)";
   const std::string pumping = injects_energy(c, theta);
   if (!pumping.empty()) return pumping;
   try {

@@ -98,7 +98,7 @@ bool Diagnosis::confirm_in_simulation(const std::string& ext_path, MjcfEdits& ed
   nlohmann::json& causes = result_.report["causes"];
   auto write = [&](const MjcfEdits& e) {
     std::vector<std::string> ignored;
-    write_text_atomic(ext_path, edit_mjcf(opt_.model, e, ignored));
+    write_text_atomic(ext_path, write_model(e, ignored));
   };
   bool rejected_any = false;
   try {
@@ -185,7 +185,7 @@ bool Diagnosis::refit_written_effects(const std::string& ext_path, MjcfEdits& ed
                                     [&](const auto& t) { return is_diagnosed(t) && std::find(refitted.begin(), refitted.end(), t.second) != refitted.end(); }),
                      bare.texts.end());
     std::vector<std::string> ignored;
-    write_text_atomic(ext_path, edit_mjcf(opt_.model, bare, ignored));
+    write_text_atomic(ext_path, write_model(bare, ignored));
     const MjcfRegressor ext(ext_path);
     const Eigen::VectorXd rest = fit_.b - written_prediction(ext, ext.base_parameters(), fit_);
     std::vector<const BlockColumns*> blocks;

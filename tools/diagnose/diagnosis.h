@@ -9,6 +9,7 @@
 //   shape_search.cc  the shape of one candidate (grid, zoom, plateau middle, local polish)
 //   selection.cc   forward selection, backward elimination, the `parameters` decision
 //   written_parameters.cc  the physically consistent parameters extended.xml states
+//   written_form.cc  a spring and viscous friction written as MuJoCo's stiffness/springref and damping
 //   confirm.cc     causes whose written form makes rollouts worse beyond noise are rejected
 //   verify.cc      the written model: extended.xml, its own inverse dynamics, rollouts
 //   report_json.cc report.json (causes, metrics, cross-tests) and series.csv
@@ -113,6 +114,20 @@ struct WrittenParameters {
 };
 nlohmann::json written_parameters_json(const WrittenParameters& w);
 
+// The edits as extended.xml holds them (written_form.cc): diagnosed `spring` and `viscous`
+// declarations turned into the joint's stiffness/springref and damping.
+struct WrittenForm {
+  MjcfEdits edits;                                  // what edit_mjcf gets
+  std::map<std::string, nlohmann::json> as_mjcf;    // declaration data -> the joint attributes it became
+  std::map<std::string, std::string> kept_why;      // declaration data -> why it stays a plugin text
+};
+// The edits with every diagnosed spring (stiffness k > 0 in total) and viscous declaration
+// (damping >= 0 in total) on a hinge or slide joint of m turned into that joint's attributes, on
+// top of what the edits already write there or else m's own values; `degrees`: the file states
+// hinge angles in degrees (springref is written in them); `defined`: the joints the file itself
+// defines (others keep their declarations: their attributes cannot be written).
+WrittenForm mujoco_form(const mjModel* m, bool degrees, const std::vector<std::string>& defined, const MjcfEdits& edits);
+
 // "effect@joint" (or "parameters") of every cause rejected in simulation (confirm.cc).
 nlohmann::json rejected_causes(const nlohmann::json& causes);
 
@@ -199,6 +214,10 @@ class Diagnosis {
   void write_series(const std::string& out_dir, const Eigen::VectorXd& final_pred_fit, const Eigen::VectorXd& final_test) const;
   // written_parameters.cc
   WrittenParameters consistent_parameters() const;
+  // written_form.cc
+  WrittenForm written_form(const MjcfEdits& edits) const;
+  std::string write_model(const MjcfEdits& edits, std::vector<std::string>& notes) const;
+  nlohmann::json report_written_form(const MjcfEdits& edits, std::vector<std::string>& notes);
   // confirm.cc
   bool confirm_in_simulation(const std::string& ext_path, MjcfEdits& edits);
   void note_rejections(const MjcfEdits& edits, std::vector<std::string>& notes);
@@ -267,6 +286,8 @@ class Diagnosis {
   std::vector<std::string> notes_;
   FilterPlan filter_plan_;
   DelayResult delay_;   // #22
+  mutable std::optional<bool> degrees_;   // the model file's hinge angles in degrees (written_form.cc)
+  mutable std::optional<std::vector<std::string>> defined_joints_;   // the joints the model file itself defines (written_form.cc)
   mutable std::shared_ptr<mjData> sim_data_;   // #22: the state the stateful simulations read (one thread)
   std::deque<spml_shape_param> synthesized_;   // #22: the level keys of stateful plugins, searched as shapes
 };

@@ -101,6 +101,17 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
     if (c.contains("superseded_by")) s << " (superseded by " << c["superseded_by"].get<std::string>() << ")";
     if (c.contains("rejected")) s << " - **rejected, not in extended.xml**: " << c["rejected"].value("reason", "");
     s << "\n   - " << params_text(c, "\n   - ") << "\n";
+    if (c.value("written_as", "") == "mjcf") {   // a spring or viscous friction in MuJoCo's own terms (written_form.cc)
+      const auto& m = c["mjcf"];
+      s << "   - in extended.xml as MuJoCo's own attributes of joint " << m["joint"].get<std::string>() << ":";
+      if (m.contains("damping")) s << " damping " << num(m["damping"].get<double>());
+      if (m.contains("stiffness"))
+        s << " stiffness " << num(m["stiffness"].get<double>()) << ", springref " << num(m["springref"].get<double>()) << " "
+          << m["springref_unit"].get<std::string>();
+      s << "\n";
+    } else if (c.value("written_as", "") == "plugin") {
+      s << "   - in extended.xml as an spml plugin declaration (plain MuJoCo ignores it)\n";
+    }
     if (c.contains("not_identifiable") && !c["not_identifiable"].empty())
       s << "   - not identifiable from this data: " << c["not_identifiable"].size() << " base parameter(s)\n";
   }

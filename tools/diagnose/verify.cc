@@ -25,14 +25,14 @@ Eigen::VectorXd Diagnosis::written_prediction(const MjcfRegressor& ext, const Mj
 // splits (its own inverse dynamics, reloaded with MuJoCo).
 std::pair<Eigen::VectorXd, Eigen::VectorXd> Diagnosis::write_scored(const std::string& ext_path, MjcfEdits& e, std::vector<std::string>& n) {
   try {
-    result_.extended_mjcf = edit_mjcf(opt_.model, e, n);
+    result_.extended_mjcf = write_model(e, n);
   } catch (const std::runtime_error& err) {
     if (e.inertials.empty()) throw;
     // A compiler setting that would override written inertials (inertiafromgeom, settotalmass).
     e.inertials.clear();
     n.push_back(std::string(err.what()) + ": the re-identified inertials are not written");
     parameters_partial_ = true;
-    result_.extended_mjcf = edit_mjcf(opt_.model, e, n);
+    result_.extended_mjcf = write_model(e, n);
   }
   write_text_atomic(ext_path, result_.extended_mjcf);
   MjcfRegressor ext(ext_path);
@@ -101,12 +101,7 @@ std::pair<Eigen::VectorXd, Eigen::VectorXd> Diagnosis::verify(const std::string&
   R["extended_check"] = {{"max_abs_deviation", (written.first - final_pred_fit).cwiseAbs().maxCoeff()},
                          {"rms_torque", std::sqrt(fit_.b.squaredNorm() / static_cast<double>(fit_.b.size()))}};
   R["final"] = metrics(fit_.b - written.first, test_.b - written.second);
-  nlohmann::json plugins = nlohmann::json::array();
-  for (const auto& [name, data] : edits.texts) plugins.push_back(name);
-  R["needs_spml_plugins"] = plugins;
-  if (!plugins.empty())
-    notes.push_back("extended.xml declares " + std::to_string(plugins.size()) + " spml force plugin(s) (needs_spml_plugins): plain MuJoCo "
-                    "ignores these <custom><text> elements; simulate with spml (ForceEffects) to see them");
+  R["needs_spml_plugins"] = report_written_form(edits, notes);   // what stays a plugin text (written_form.cc)
   result_.timings.outputs += since(t0);
   t0 = Clock::now();
   run_rollouts(ext_path, notes);

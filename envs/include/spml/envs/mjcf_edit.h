@@ -14,7 +14,8 @@
 namespace spml {
 
 struct MjcfEdits {
-  // joint name -> MJCF attribute (armature, damping, frictionloss, stiffness) -> value
+  // joint name -> MJCF attribute (armature, damping, frictionloss, stiffness, springref) -> value, in the
+  // file's units (a hinge's springref in degrees where mjcf_angles_in_degrees)
   std::map<std::string, std::map<std::string, double>> joint_attributes;
   struct Inertial {
     std::string body;
@@ -35,5 +36,14 @@ struct MjcfEdits {
 // an MJCF or when its compiler settings would override written inertials (inertiafromgeom="true",
 // settotalmass).
 std::string edit_mjcf(const std::string& model_path, const MjcfEdits& edits, std::vector<std::string>& notes);
+
+// Whether the file's hinge angles (range, ref, springref) are in degrees: MuJoCo's default,
+// unless a <compiler angle="radian"> in the file itself says otherwise (an included file's
+// compiler is not read). Throws like edit_mjcf when the file is not an MJCF.
+bool mjcf_angles_in_degrees(const std::string& model_path);
+
+// The joints the file itself defines under <worldbody> (the ones edit_mjcf can give attributes;
+// not those of an included file).
+std::vector<std::string> mjcf_defined_joints(const std::string& model_path);
 
 }  // namespace spml
