@@ -523,8 +523,9 @@ TEST(DiagnoseNative, SpringIsWrittenAsMuJoCosStiffnessAndSpringref) {
     EXPECT_LT(after, before);
     // The written file states what the fit predicts (re-identified parameters: the effects are refitted with
     // what is written, and the check is against the joint fit's prediction).
-    if (r_json["parameters_written"] == "none")
+    if (r_json["parameters_written"] == "none") {
       EXPECT_LT(r_json["extended_check"]["max_abs_deviation"].get<double>(), 1e-8 * r_json["extended_check"]["rms_torque"].get<double>());
+    }
   }
 }
 
