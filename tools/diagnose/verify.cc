@@ -92,10 +92,12 @@ std::pair<Eigen::VectorXd, Eigen::VectorXd> Diagnosis::verify(const std::string&
   }
   // The effects are fitted again with the parameters written (and checked by their plugins).
   changed |= refit_written_effects(ext_path, edits, notes);
-  if (changed) {
-    std::vector<std::string> again;   // the same edit notes as before, not repeated
-    written = write_scored(ext_path, edits, again);
-  }
+  // Written again even when nothing changed: the rejection trials and the refit leave other
+  // versions of the model at ext_path (EMPS: the declaration-free model was the published
+  // extended.xml, while `final` scored the right one).
+  std::vector<std::string> again;   // the same edit notes as before, not repeated
+  const auto rewritten = write_scored(ext_path, edits, again);
+  if (changed) written = rewritten;
   guard_held_out(ext_path, edits, notes, written);
   R["extended_mjcf"] = out_dir.empty() ? "" : "extended.xml";
   R["extended_check"] = {{"max_abs_deviation", (written.first - final_pred_fit).cwiseAbs().maxCoeff()},
