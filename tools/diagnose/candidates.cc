@@ -6,6 +6,7 @@
 #include "diagnosis.h"
 #include "spml/column_unit.h"
 #include "spml/parse.h"
+#include "spml/signal.h"
 
 namespace spml::diagnose_detail {
 
@@ -75,7 +76,12 @@ void Diagnosis::add_candidates(const spml_force_plugin& p, const std::vector<con
       }
       c.shape_range.emplace_back(lo, hi);
     }
-    if (std::string(p.name) == "ripple" && !bound_wavenumber(c, q.maxCoeff() - q.minCoeff())) continue;
+    if (std::string(p.name) == "ripple") {
+      std::vector<double> speed(static_cast<size_t>(q.size()));
+      for (Eigen::Index i = 0; i < q.size(); ++i) speed[static_cast<size_t>(i)] = std::fabs(fit_.split.X(i, fit_.cols->qd[static_cast<size_t>(j)]));
+      std::nth_element(speed.begin(), speed.begin() + static_cast<std::ptrdiff_t>(speed.size() / 2), speed.end());
+      if (!bound_wavenumber(c, q.maxCoeff() - q.minCoeff(), speed.empty() ? 0.0 : speed[speed.size() / 2])) continue;
+    }
     cands_.push_back(std::move(c));
   }
 }
@@ -83,8 +89,14 @@ void Diagnosis::add_candidates(const spml_force_plugin& p, const std::vector<con
 // A position-periodic effect is told from a smooth position-dependent residual only when the
 // stroke spans several of its periods: the ripple's wavenumber (`gear`, periods per radian
 // over 2 pi) is searched from min_ripple_periods periods over the stroke upwards, or fixed
-// at the drive's gear ratio when given. False (with a note) when nothing is left to search.
-bool Diagnosis::bound_wavenumber(Candidate& c, double stroke) {
+// at the drive's gear ratio when given. Upwards it is bounded by the band the data keep (the
+// parallel filter's cut-off, else 0.4 of the sampling rate) at the joint's median speed: a
+// faster ripple is seen only near reversals, where it dresses up the filtered step of Coulomb
+// friction (gear 199 beside a hidden Coulomb level through a 10 Hz low-pass: 32 Hz at the
+// joint's median speed). False (with a note) when nothing is left to search.
+bool Diagnosis::bound_wavenumber(Candidate& c, double stroke, double median_speed) {
+  const double dt = fit_.split.t.size() == fit_.split.rows() && fit_.split.rows() > 1 ? median_step(fit_.split.t) : 0;
+  const double band_hz = !fit_.sos.empty() ? filter_plan_.lowpass.cutoff_hz : dt > 0 ? 0.4 / dt : 0;
   for (size_t k = 0; k < c.shape.size(); ++k) {
     if (std::string(c.shape[k]->key) != "gear") continue;
     auto& [lo, hi] = c.shape_range[k];
@@ -92,11 +104,19 @@ bool Diagnosis::bound_wavenumber(Candidate& c, double stroke) {
       lo = hi = opt_.ripple_gear;
       return true;
     }
+    const std::string unit = column_unit("q:", reg_->model()->jnt_type[c.joint] == mjJNT_SLIDE);
     lo = std::max(lo, std::ceil(opt_.min_ripple_periods * 2 * M_PI / std::max(stroke, 1e-12)));
     if (lo > hi) {
       not_tried_.push_back({{"effect", "ripple"}, {"joint", c.joint_name},
-                            {"reason", "the stroke (" + fmt(stroke) + " " + column_unit("q:", reg_->model()->jnt_type[c.joint] == mjJNT_SLIDE) + ") spans fewer than " + fmt(opt_.min_ripple_periods) +
+                            {"reason", "the stroke (" + fmt(stroke) + " " + unit + ") spans fewer than " + fmt(opt_.min_ripple_periods) +
                                            " periods of any wavenumber the plugin allows: a ripple cannot be told from a smooth residual"}});
+      return false;
+    }
+    if (band_hz > 0 && median_speed > 0) hi = std::min(hi, std::floor(2 * M_PI * band_hz / median_speed));
+    if (lo > hi) {
+      not_tried_.push_back({{"effect", "ripple"}, {"joint", c.joint_name},
+                            {"reason", "at the joint's median speed (" + fmt(median_speed) + " " + unit + "/s) every wavenumber from " + fmt(lo) +
+                                           " up lies above the band the data keep (" + fmt(band_hz) + " Hz): such a ripple shows only near reversals"}});
       return false;
     }
   }

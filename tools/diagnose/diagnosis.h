@@ -176,7 +176,7 @@ class Diagnosis {
   void find_candidates();
   void add_candidates(const spml_force_plugin& p, const std::vector<const spml_shape_param*>& shape,
                       const std::vector<std::pair<std::string, std::string>>& fixed);
-  bool bound_wavenumber(Candidate& c, double stroke);
+  bool bound_wavenumber(Candidate& c, double stroke, double median_speed);
   std::vector<std::pair<std::string, std::string>> config_of(const Candidate& c, const std::vector<double>& shape) const;
   BlockColumns columns(const PluginInstance& inst, const SplitData& s, bool filtered = true) const;
   BlockColumns columns_of(const Candidate& c, const SplitData& s) const;
