@@ -284,7 +284,8 @@ Identification identify(const MjcfRegressor& reg, const MjcfRegressor::Base& bas
     try {
       twin = simulated_twin(options.mjcf_path, train, {}, options.instruments);
     } catch (const std::runtime_error& e) {
-      throw DatasetError(where + ": " + e.what());
+      const std::string what = e.what(), own = "split '" + split + "'";   // names the split itself when it is the split's fault
+      throw DatasetError(what.rfind(own, 0) == 0 ? where + what.substr(own.size()) : where + ": " + what);
     }
     Eigen::MatrixXd Z;
     Eigen::VectorXd unused;

@@ -4,6 +4,8 @@
 #include <iostream>
 #include <new>
 
+#include <mujoco/mujoco.h>
+
 #include "commands.h"
 #include "spml/force_plugin.h"
 #include "spml/learner.h"
@@ -21,7 +23,12 @@ int fail(const std::string& message, int code) {
 
 }  // namespace
 
+// MuJoCo prints its warnings on stdout (and into MUJOCO_LOG.TXT in the working directory):
+// stdout may be a --json document, so they go to stderr instead.
+void mujoco_warning_to_stderr(const char* msg) { std::cerr << "spml: MuJoCo warning: " << msg << "\n"; }
+
 int main(int argc, char** argv) {
+  mju_user_warning = mujoco_warning_to_stderr;
   CLI::App app{"spml: semi-parametric model learning for robot dynamics"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "spml " SPML_VERSION " (dataset format spml/1, learner ABI " +

@@ -125,7 +125,11 @@ bool Diagnosis::confirm_in_simulation(const std::string& ext_path, MjcfEdits& ed
       nlohmann::json record;
       for (auto i = static_cast<std::ptrdiff_t>(causes.size()) - 1; i >= 0 && !dropped; --i) {
         nlohmann::json& c = causes[static_cast<size_t>(i)];
-        if (c.contains("superseded_by") || c.contains("rejected") || !on_joints(c, before.joints, worse)) continue;
+        // `parameters` lists the joints of its contradicted base parameters, but the inertials it
+        // writes act on every joint (a hidden Coulomb level on a slide made 27x worse rollouts on
+        // the hinge before it, with `parameters` listing the slide only, and nothing rejected).
+        const bool everywhere = c["effect"] == "parameters" && !edits.inertials.empty();
+        if (c.contains("superseded_by") || c.contains("rejected") || !(everywhere || on_joints(c, before.joints, worse))) continue;
         if (c["effect"] != "parameters") {
           if (c.contains("declaration") && (dropped = better_without(without_cause(edits, c), record))) c["rejected"] = record;
           continue;

@@ -111,6 +111,7 @@ struct Cause {
 struct WrittenParameters {
   ConsistentIdentification id;      // standard parameters; id.extra: the kept effects' coefficients
   Eigen::VectorXd prediction_fit;   // its torques on the fit split (through the parallel filter)
+  bool two_stage = false;           // fitted on the columns projected onto the iv instruments
 };
 nlohmann::json written_parameters_json(const WrittenParameters& w);
 
@@ -196,6 +197,7 @@ class Diagnosis {
   // selection.cc
   void select();
   void score_candidates(const Fit& current, const std::vector<int>& chosen, const std::set<int>& research, std::vector<int>& order);
+  double evidence_on_own_joints(int candidate, const Fit& smaller, const Fit& larger) const;
   bool evidence_holds(int candidate, const Fit& smaller, const Fit& larger) const;
   bool cause_needed(size_t i, const std::vector<size_t>& set) const;
   void eliminate_backward();
@@ -281,6 +283,7 @@ class Diagnosis {
   Fit parameters_fit_;                  // the free fit whose estimates decide `parameters` (ls or iv)
   std::string parameters_estimator_;    // "ls" or "iv", as it ran
   std::unique_ptr<SplitData> twin_;     // iv: the fit split on the model's simulated states
+  nlohmann::json instruments_;          // iv: the tracking loop's bandwidth and RMS gap per joint
   mutable bool parameters_partial_ = false;   // some re-identified parameter has no MJCF attribute written
   std::optional<WrittenParameters> written_;  // set in build_report when `parameters` is named
   std::vector<std::string> notes_;

@@ -237,6 +237,7 @@ void Diagnosis::build_report(const std::string& out_dir) {
                      {"equations", fit_.y0.size()}, {"parameters_n_eff", parameters_n_eff_},
                      {"parameters_delta_bic", parameters_delta_bic_}, {"parameters_contradicted", parameters_contradicted_},
                      {"estimator", {{"parameters", parameters_estimator_.empty() ? "ls" : parameters_estimator_}, {"effects", "ls"}}}};
+  if (!instruments_.is_null()) R["statistics"]["estimator"]["instruments"] = instruments_;
   const bool free = parameters_named_;
   const Fit final_fit = refit(kept_effects(), free, true);
   const Eigen::VectorXd final_test = residual_on(test_, kept_effects(), free, final_fit);

@@ -121,36 +121,36 @@ void Diagnosis::select() {
   result_.timings.refits += since(t0);
 }
 
-// The candidate's evidence again, on the outputs it acts on, with the effective sample size
-// of the larger fit's residuals there (statistics.h): the ranking used every row of every
-// joint as independent, which filtered or autocorrelated residuals are not, and a joint whose
-// residual is smoother than the others' was credited with their white rows (a clean 7-joint
-// chain had a 0.2 N m ripple named on j0 at Delta BIC 359 whose amplitudes lay within 3
-// robust standard errors of 0).
-bool Diagnosis::evidence_holds(int candidate, const Fit& smaller, const Fit& larger) const {
+// Delta BIC of a cause on the outputs it acts on, with the effective sample size of the
+// larger fit's residuals there (statistics.h): every row of every joint counted as
+// independent credits a cause with rows that are not (filtered or autocorrelated residuals),
+// and a joint whose residual is smoother than the others' with their white rows (a clean
+// 7-joint chain had a 0.2 N m ripple named on j0 at Delta BIC 359, its amplitudes within 3
+// robust standard errors of 0). Joining (evidence_holds) and staying (cause_needed) use it alike.
+double Diagnosis::evidence_on_own_joints(int candidate, const Fit& smaller, const Fit& larger) const {
   const Candidate& c = cands_[static_cast<size_t>(candidate)];
   const std::vector<int> outs = outputs_of(candidate);
   Eigen::VectorXd r(static_cast<Eigen::Index>(outs.size()) * fit_.N);
   for (size_t k = 0; k < outs.size(); ++k) r.segment(static_cast<Eigen::Index>(k) * fit_.N, fit_.N) = larger.residual.segment(outs[k] * fit_.N, fit_.N);
   const double n_eff = static_cast<double>(r.size()) * effective_fraction(r, fit_.N);
   const double dk = larger.rank - smaller.rank + static_cast<double>(c.shape.size());
-  return delta_bic(n_eff, rss_on(smaller.residual, outs, fit_.N), rss_on(larger.residual, outs, fit_.N), dk, rss_floor(fit_.b)) > opt_.bic_threshold;
+  return delta_bic(n_eff, rss_on(smaller.residual, outs, fit_.N), rss_on(larger.residual, outs, fit_.N), dk, rss_floor(fit_.b));
+}
+
+bool Diagnosis::evidence_holds(int candidate, const Fit& smaller, const Fit& larger) const {
+  return evidence_on_own_joints(candidate, smaller, larger) > opt_.bic_threshold;
 }
 
 // Is cause i still needed among the causes `set` (indices into causes_, i's included)?
 bool Diagnosis::cause_needed(size_t i, const std::vector<size_t>& set) const {
-  const double n = static_cast<double>(fit_.y0.size());
   std::vector<int> with, without;
   for (size_t k : set) {
     with.push_back(causes_[k].candidate);
     if (k != i) without.push_back(causes_[k].candidate);
   }
   const Fit fw = refit(with, true), fo = refit(without, true);
-  const double dk = fw.rank - fo.rank + static_cast<double>(cands_[static_cast<size_t>(causes_[i].candidate)].shape.size());
   const auto outs = outputs_of(causes_[i].candidate);
-  // Evidence with the effective sample size of the larger fit's residuals (statistics.h).
-  const double n_eff = n * effective_fraction(fw.residual, fit_.N);
-  return delta_bic(n_eff, fo.rss, fw.rss, dk, rss_floor(fit_.b)) > opt_.bic_threshold &&
+  return evidence_holds(causes_[i].candidate, fo, fw) &&
          gains_on_test(rss_on(residual_on(test_, without, true, fo), outs, test_.N),
                        rss_on(residual_on(test_, with, true, fw), outs, test_.N), opt_.min_gain, rss_floor(test_.b));
 }
@@ -214,8 +214,11 @@ void Diagnosis::decide_parameters() {
 Fit Diagnosis::iv_refit(const std::vector<int>& causes) {
   if (!twin_ && parameters_estimator_.empty()) {
     try {
-      twin_ = std::make_unique<SplitData>(prepare(simulated_twin(opt_.model, fit_.split, fit_.runs).split, fit_.runs));
+      const SimulatedTwin twin = simulated_twin(opt_.model, fit_.split, fit_.runs);
+      twin_ = std::make_unique<SplitData>(prepare(twin.split, fit_.runs));
       parameters_estimator_ = "iv";
+      instruments_ = {{"tracking_hz", twin.tracking_hz}, {"tracking_rms", nlohmann::json::object()}};
+      for (size_t j = 0; j < twin.joints.size(); ++j) instruments_["tracking_rms"][twin.joints[j]] = twin.rms_tracking[j];
     } catch (const std::exception& e) {
       notes_.push_back(std::string("the instrumental-variable estimator could not simulate the model along the data (") + e.what() +
                        "): `parameters` is decided by least squares");

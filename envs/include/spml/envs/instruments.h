@@ -21,7 +21,7 @@ namespace spml {
 
 struct InstrumentOptions {
   // Bandwidth of the tracking loop (critically damped) [Hz]; 0: the lowest of 1, 2, 4, ... Hz
-  // (at most a tenth of the sampling rate) that keeps every joint's RMS gap within 1 % of
+  // (at most a tenth of the sampling rate) that keeps every joint's RMS gap within 10 % of
   // the joint's own RMS motion.
   double tracking_hz = 0;
 };
