@@ -282,7 +282,9 @@ Identification identify(const MjcfRegressor& reg, const MjcfRegressor::Base& bas
     if (options.mjcf_path.empty()) throw std::invalid_argument("identify: the IV estimator needs the MJCF's path to simulate");
     SimulatedTwin twin;
     try {
-      twin = simulated_twin(options.mjcf_path, train, {}, options.instruments);
+      InstrumentOptions io = options.instruments;
+      if (ds.provenance.count("filter")) io.max_gap = std::min(io.max_gap, 0.01);   // low-passed positions (instruments.h)
+      twin = simulated_twin(options.mjcf_path, train, {}, io);
     } catch (const std::runtime_error& e) {
       const std::string what = e.what(), own = "split '" + split + "'";   // names the split itself when it is the split's fault
       throw DatasetError(what.rfind(own, 0) == 0 ? where + what.substr(own.size()) : where + ": " + what);

@@ -207,6 +207,10 @@ TEST(CliIdentify, InstrumentalVariablesOnRawDifferences) {
   EXPECT_NEAR(iv, 9.43, 0.05 * 9.43);
   EXPECT_GT(ji["instruments"]["tracking_hz"].get<double>(), 0);
   for (const auto& [joint, gap] : ji["instruments"]["tracking_rms"].items()) EXPECT_LT(gap.get<double>(), 0.01) << joint;
+  // A loop faster than a tenth of the sampling rate is not stable between the samples.
+  auto fast = run(spml_bin() + " identify -m " + model + " -d " + file + " --estimator iv --tracking-hz 200 --json");
+  EXPECT_EQ(fast.exit_code, 1);
+  EXPECT_NE(fast.output.find("above a tenth of the sampling rate"), std::string::npos) << fast.output;
   auto bad = run(spml_bin() + " identify -m " + model + " -d " + file + " --tracking-hz 2");
   EXPECT_EQ(bad.exit_code, 2);
   EXPECT_NE(bad.output.find("--estimator iv"), std::string::npos) << bad.output;

@@ -570,6 +570,52 @@ TEST(DiagnoseCases, TheFileLeftInOutIsTheModelScored) {
       << r["rollout"].dump();
 }
 
+// A reviewer's hinge + slide arm with a Coulomb level (0.35 N) hidden on the slide, measured
+// as a user would (spml generate --jitter 1e-5, raw differences through spml import, decimated
+// to 200 Hz): the Coulomb cause stays. It joined on the evidence of its own joint's rows, but
+// backward elimination judged it on every joint's rows and dropped it as "superseded_by:
+// redundant" (the friction then went into `parameters` as damping).
+TEST(DiagnoseCases, ACauseStaysOnTheEvidenceItJoinedOn) {
+  const auto dir = test::temp_dir("dc-stays");
+  const std::string arm = R"(<mujoco model="rv_arm2">
+  <compiler angle="radian"/>
+  <option timestep="0.001" gravity="0 0 -9.81"/>
+  <worldbody>
+    <body name="b1" pos="0 0 0.5">
+      <joint name="sh" type="hinge" axis="0 1 0" armature="0.05" damping="0.3"/>
+      <inertial pos="0.15 0 0" mass="2.0" diaginertia="0.01 0.02 0.02"/>
+      <body name="b2" pos="0.3 0 0">
+        <joint name="ext" type="slide" axis="1 0 0" armature="0.1" damping="2"/>
+        <inertial pos="0.1 0.0 0.02" mass="1.2" diaginertia="0.005 0.008 0.008"/>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+)";
+  const std::string user = (dir / "arm2.xml").string(), truth = (dir / "arm2_coul.xml").string();
+  std::ofstream(user) << arm;
+  std::string with = arm;
+  with.replace(with.find("  <worldbody>"), 0, R"(  <custom><text name="spml.plugin.x" data="type=coulomb joints=ext fc=0.35"/></custom>
+)");
+  std::ofstream(truth) << with;
+  const std::string csv = (dir / "c.csv").string(), h5 = (dir / "c.h5").string(), bin = test::spml_bin();
+  ASSERT_EQ(test::run(bin + " generate --model '" + truth + "' --duration 10 --jitter 1e-5 --seed 1 -q -o '" + csv + "' 2>&1").exit_code, 0);
+  ASSERT_EQ(test::run(bin + " import '" + csv + "' --t t --x 'q:sh,q:ext' --y 'tau:sh,tau:ext' --derive --drop-edges 100 --decimate 5 --out '" + h5 +
+                      "' 2>&1").exit_code, 0);
+  DiagnoseOptions o;
+  o.model = user;
+  o.data = h5;
+  o.rollouts = 0;
+  const auto r = diagnose(o, "").report;
+  bool kept = false;
+  for (const auto& c : r["causes"])
+    if (c["effect"] == "coulomb" && c["joints"][0] == "ext") {
+      kept = !c.contains("superseded_by");
+      EXPECT_NEAR(c["params"]["ext.fc"].get<double>(), 0.35, 0.05);
+    }
+  EXPECT_TRUE(kept) << r["causes"].dump(1);
+}
+
 // report.md and report.json carry units from each joint's type (issue #23 item 2): a slide
 // joint's RMSE is in N and its rollout error in m, a hinge's in N·m and rad.
 TEST(DiagnoseCases, ReportUnitsFollowTheJointType) {

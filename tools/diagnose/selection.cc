@@ -214,7 +214,9 @@ void Diagnosis::decide_parameters() {
 Fit Diagnosis::iv_refit(const std::vector<int>& causes) {
   if (!twin_ && parameters_estimator_.empty()) {
     try {
-      const SimulatedTwin twin = simulated_twin(opt_.model, fit_.split, fit_.runs);
+      InstrumentOptions io;
+      if (filter_plan_.source == FilterPlan::Source::recorded) io.max_gap = 0.01;   // low-passed positions (instruments.h)
+      const SimulatedTwin twin = simulated_twin(opt_.model, fit_.split, fit_.runs, io);
       twin_ = std::make_unique<SplitData>(prepare(twin.split, fit_.runs));
       parameters_estimator_ = "iv";
       instruments_ = {{"tracking_hz", twin.tracking_hz}, {"tracking_rms", nlohmann::json::object()}};

@@ -21,9 +21,12 @@ namespace spml {
 
 struct InstrumentOptions {
   // Bandwidth of the tracking loop (critically damped) [Hz]; 0: the lowest of 1, 2, 4, ... Hz
-  // (at most a tenth of the sampling rate) that keeps every joint's RMS gap within 10 % of
-  // the joint's own RMS motion.
+  // (at most a tenth of the sampling rate) that keeps every joint's RMS gap within `max_gap`
+  // of the joint's own RMS motion.
   double tracking_hz = 0;
+  // 10 % where positions come raw (a tighter loop feeds their noise into the instruments); a
+  // caller whose positions went through a low-pass may ask for 1 % (less model error in them).
+  double max_gap = 0.1;
 };
 
 struct SimulatedTwin {
