@@ -17,6 +17,16 @@ ModelPtr load_mjcf(const std::string& path) {
   return ModelPtr(m);
 }
 
+Simulation open_simulation(const std::string& mjcf_path) {
+  Simulation sim;
+  sim.model = load_mjcf(mjcf_path);
+  sim.model->opt.disableflags |= mjDSBL_CONTACT;
+  sim.effects = std::make_unique<ForceEffects>(sim.model.get(), mjcf_path);
+  if (!sim.effects->empty()) sim.effects->attach();
+  sim.data = make_data(sim.model.get());
+  return sim;
+}
+
 std::string joint_description(const mjModel* m, int j) {
   static const char* kType[4] = {"free", "ball", "slide", "hinge"};
   const int type = m->jnt_type[j];

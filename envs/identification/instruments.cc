@@ -119,12 +119,8 @@ SimulatedTwin simulated_twin(const std::string& mjcf_path, const Split& s, const
                              const InstrumentOptions& options) {
   if (s.t.size() != s.rows() || s.rows() < 2)
     throw std::runtime_error("split '" + s.name + "' has no time stamps: the instruments simulate the model along them");
-  ModelPtr model = load_mjcf(mjcf_path);
-  mjModel* m = model.get();
-  m->opt.disableflags |= mjDSBL_CONTACT;
-  ForceEffects effects(m, mjcf_path);
-  if (!effects.empty()) effects.attach();
-  DataPtr data = make_data(m);
+  const Simulation sim = open_simulation(mjcf_path);
+  mjModel* m = sim.m();
   SimulatedTwin out;
   out.split = s;
   const Columns c = columns_of(m, s, out.joints);
@@ -136,7 +132,7 @@ SimulatedTwin simulated_twin(const std::string& mjcf_path, const Split& s, const
                              std::to_string(ceiling) + " Hz): the loop would not be stable between the samples");
   if (options.tracking_hz > 0) {
     out.tracking_hz = options.tracking_hz;
-    simulate_along(m, data.get(), effects, s, c, starts, 2 * M_PI * out.tracking_hz, out);
+    simulate_along(m, sim.d(), *sim.effects, s, c, starts, 2 * M_PI * out.tracking_hz, out);
     return out;
   }
   // Automatic: the lowest bandwidth (1, 2, 4, ... Hz, at most a tenth of the sampling rate)
@@ -156,7 +152,7 @@ SimulatedTwin simulated_twin(const std::string& mjcf_path, const Split& s, const
   }
   for (double hz = 1;; hz *= 2) {
     out.tracking_hz = std::min(hz, ceiling);
-    simulate_along(m, data.get(), effects, s, c, starts, 2 * M_PI * out.tracking_hz, out);
+    simulate_along(m, sim.d(), *sim.effects, s, c, starts, 2 * M_PI * out.tracking_hz, out);
     bool close = true;
     for (size_t j = 0; j < motion.size(); ++j) close &= out.rms_tracking[j] <= options.max_gap * motion[j];
     if (close || out.tracking_hz >= ceiling) return out;

@@ -11,13 +11,10 @@
 namespace spml::diagnose_detail {
 
 RolloutResult rollout(const std::string& mjcf_path, const Split& s, int windows, double horizon, const std::vector<Eigen::Index>& runs) {
-  ModelPtr model = load_mjcf(mjcf_path);
-  mjModel* m = model.get();
-  m->opt.disableflags |= mjDSBL_CONTACT;
-  ForceEffects effects(m, mjcf_path);
-  if (!effects.empty()) effects.attach();
-  DataPtr data = make_data(m);
-  mjData* d = data.get();
+  const Simulation sim = open_simulation(mjcf_path);
+  mjModel* m = sim.m();
+  mjData* d = sim.d();
+  ForceEffects& effects = *sim.effects;
   RolloutResult out;
   out.horizon = horizon;
   if (s.t.size() != s.rows()) throw std::runtime_error("split '" + s.name + "' has no time stamps: rollouts need them");
