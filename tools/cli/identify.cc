@@ -89,7 +89,7 @@ void add_identify(CLI::App& app) {
                   "(default with --write-model)")
       ->check(CLI::IsMember({"ls", "iv", "consistent"}));
   cmd->add_option("--tracking-hz", a->tracking_hz, "iv: bandwidth [Hz] of the loop that keeps the simulation on the measured path (default 0: "
-                  "the lowest of 1, 2, 4, ... Hz that keeps each joint within 10 % of its motion)")
+                  "the lowest of 1, 2, 4, ... Hz that keeps each joint within 10 % of its motion, 1 % where the dataset records a low-pass)")
       ->check(finite_number(0, 1e3));
   cmd->add_option("--prior-weight", a->prior_weight, "consistent: weight of the prior toward the MJCF (default 1)")
       ->check(finite_number(1e-6, 1e6));   // the bounds of diagnose's --prior-weight

@@ -199,8 +199,8 @@ class Diagnosis {
   void score_candidates(const Fit& current, const std::vector<int>& chosen, const std::set<int>& research, std::vector<int>& order);
   double evidence_on_own_joints(int candidate, const Fit& smaller, const Fit& larger) const;
   bool evidence_holds(int candidate, const Fit& smaller, const Fit& larger) const;
-  bool cause_needed(size_t i, const std::vector<size_t>& set) const;
-  void eliminate_backward();
+  bool cause_needed(size_t i, const std::vector<size_t>& set, bool base_free) const;
+  void eliminate_backward(bool base_free = true);
   void decide_parameters();
   Fit iv_refit(const std::vector<int>& causes);
   std::vector<int> kept_effects() const;
