@@ -570,6 +570,26 @@ TEST(DiagnoseCases, TheFileLeftInOutIsTheModelScored) {
       << r["rollout"].dump();
 }
 
+// A user's MJCF and the truth, the same with one force-plugin declaration hidden; the truth
+// measured by `spml generate --model TRUTH <generate>` and conditioned by `spml import <import>`
+// as a user would; diagnosed against the user's model (no rollouts).
+nlohmann::json diagnose_user_log(const fs::path& dir, const std::string& mjcf, const std::string& hidden, const std::string& generate,
+                                 const std::string& import) {
+  const std::string user = (dir / "user.xml").string(), truth = (dir / "true.xml").string();
+  std::ofstream(user) << mjcf;
+  std::string with = mjcf;
+  with.replace(with.find("  <worldbody>"), 0, "  <custom><text name=\"spml.plugin.x\" data=\"" + hidden + "\"/></custom>\n");
+  std::ofstream(truth) << with;
+  const std::string csv = (dir / "log.csv").string(), h5 = (dir / "log.h5").string(), bin = test::spml_bin();
+  EXPECT_EQ(test::run(bin + " generate --model '" + truth + "' " + generate + " -q -o '" + csv + "' 2>&1").exit_code, 0);
+  EXPECT_EQ(test::run(bin + " import '" + csv + "' " + import + " --out '" + h5 + "' 2>&1").exit_code, 0);
+  DiagnoseOptions o;
+  o.model = user;
+  o.data = h5;
+  o.rollouts = 0;
+  return diagnose(o, "").report;
+}
+
 // A reviewer's hinge + slide arm with a Coulomb level (0.35 N) hidden on the slide, measured
 // as a user would (spml generate --jitter 1e-5, raw differences through spml import, decimated
 // to 200 Hz): the Coulomb cause stays. It joined on the evidence of its own joint's rows, but
@@ -592,21 +612,8 @@ TEST(DiagnoseCases, ACauseStaysOnTheEvidenceItJoinedOn) {
   </worldbody>
 </mujoco>
 )";
-  const std::string user = (dir / "arm2.xml").string(), truth = (dir / "arm2_coul.xml").string();
-  std::ofstream(user) << arm;
-  std::string with = arm;
-  with.replace(with.find("  <worldbody>"), 0, R"(  <custom><text name="spml.plugin.x" data="type=coulomb joints=ext fc=0.35"/></custom>
-)");
-  std::ofstream(truth) << with;
-  const std::string csv = (dir / "c.csv").string(), h5 = (dir / "c.h5").string(), bin = test::spml_bin();
-  ASSERT_EQ(test::run(bin + " generate --model '" + truth + "' --duration 10 --jitter 1e-5 --seed 1 -q -o '" + csv + "' 2>&1").exit_code, 0);
-  ASSERT_EQ(test::run(bin + " import '" + csv + "' --t t --x 'q:sh,q:ext' --y 'tau:sh,tau:ext' --derive --drop-edges 100 --decimate 5 --out '" + h5 +
-                      "' 2>&1").exit_code, 0);
-  DiagnoseOptions o;
-  o.model = user;
-  o.data = h5;
-  o.rollouts = 0;
-  const auto r = diagnose(o, "").report;
+  const auto r = diagnose_user_log(dir, arm, "type=coulomb joints=ext fc=0.35", "--duration 10 --jitter 1e-5 --seed 1",
+                                   "--t t --x 'q:sh,q:ext' --y 'tau:sh,tau:ext' --derive --drop-edges 100 --decimate 5");
   bool kept = false;
   for (const auto& c : r["causes"])
     if (c["effect"] == "coulomb" && c["joints"][0] == "ext") {
@@ -642,21 +649,8 @@ TEST(DiagnoseCases, ACauseMustGainWithTheParametersTheModelKeeps) {
   </worldbody>
 </mujoco>
 )";
-  const std::string user = (dir / "arm3.xml").string(), truth = (dir / "arm3_true.xml").string();
-  std::ofstream(user) << arm;
-  std::string with = arm;
-  with.replace(with.find("  <worldbody>"), 0, R"(  <custom><text name="spml.plugin.x" data="type=coulomb joints=j3 fc=0.4"/></custom>
-)");
-  std::ofstream(truth) << with;
-  const std::string csv = (dir / "a.csv").string(), h5 = (dir / "a.h5").string(), bin = test::spml_bin();
-  ASSERT_EQ(test::run(bin + " generate --model '" + truth + "' --duration 6 --encoder-bits 17 --torque-noise 0.01 --seed 3 -q -o '" + csv +
-                      "' 2>&1").exit_code, 0);
-  ASSERT_EQ(test::run(bin + " import '" + csv + "' --t t --x 'q:j1,q:j2,q:j3' --y 'tau:j1,tau:j2,tau:j3' --derive --out '" + h5 + "' 2>&1").exit_code, 0);
-  DiagnoseOptions o;
-  o.model = user;
-  o.data = h5;
-  o.rollouts = 0;
-  const auto r = diagnose(o, "").report;
+  const auto r = diagnose_user_log(dir, arm, "type=coulomb joints=j3 fc=0.4", "--duration 6 --encoder-bits 17 --torque-noise 0.01 --seed 3",
+                                   "--t t --x 'q:j1,q:j2,q:j3' --y 'tau:j1,tau:j2,tau:j3' --derive");
   EXPECT_EQ(written_causes(r), std::vector<std::string>{"coulomb"}) << r["causes"].dump(1);
   // Every joint's held-out error as written at most what the model as given had.
   for (const auto& [joint, e] : r["final"]["rel_error_test"].items())
