@@ -127,15 +127,14 @@ Fit iv_fit_blocks(const std::vector<const BlockColumns*>& blocks, const std::vec
   fit.residual = y - F * z;
   fit.rss = fit.residual.squaredNorm();
   const double dof = std::max<double>(1.0, static_cast<double>(y.size() - n));
-  const Eigen::MatrixXd P = lu.solve(Eigen::MatrixXd(Z.transpose())).transpose();   // Z (F^T Z)^-1, as rows
-  Eigen::MatrixXd V;
-  if (hac_rows_per_output > 0) {
-    const Eigen::MatrixXd Zr = Z.array().colwise() * fit.residual.array();
-    const Eigen::MatrixXd Pinv = lu.solve(Eigen::MatrixXd::Identity(n, n));       // (Z^T F)^-1
-    V = Pinv * long_run_covariance(Zr, fit.residual, hac_rows_per_output) * Pinv.transpose() * (static_cast<double>(y.size()) / dof);
-  } else {
-    V = (fit.rss / dof) * P.transpose() * P;
-  }
+  const Eigen::MatrixXd Pinv = lu.solve(Eigen::MatrixXd::Identity(n, n));   // (Z^T F)^-1
+  // The sandwich (Z^T F)^-1 S (F^T Z)^-1: S the long-run covariance of the rows z_i r_i, or
+  // sigma^2 Z^T Z for white residuals.
+  const Eigen::MatrixXd S = hac_rows_per_output > 0
+                                ? Eigen::MatrixXd(long_run_covariance(Z.array().colwise() * fit.residual.array(), fit.residual, hac_rows_per_output) *
+                                                  (static_cast<double>(y.size()) / dof))
+                                : Eigen::MatrixXd((fit.rss / dof) * Z.transpose() * Z);
+  const Eigen::MatrixXd V = Pinv * S * Pinv.transpose();
   for (Eigen::Index k = 0; k < n; ++k) {
     const auto c = keep[static_cast<size_t>(k)];
     fit.coef[c] = z[k] / scale[k];

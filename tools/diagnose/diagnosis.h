@@ -197,7 +197,6 @@ class Diagnosis {
   // selection.cc
   void select();
   void score_candidates(const Fit& current, const std::vector<int>& chosen, const std::set<int>& research, std::vector<int>& order);
-  double evidence_on_own_joints(int candidate, const Fit& smaller, const Fit& larger) const;
   bool evidence_holds(int candidate, const Fit& smaller, const Fit& larger) const;
   bool cause_needed(size_t i, const std::vector<size_t>& set, bool base_free) const;
   void eliminate_backward(bool base_free = true);

@@ -121,24 +121,21 @@ void Diagnosis::select() {
   result_.timings.refits += since(t0);
 }
 
-// Delta BIC of a cause on the outputs it acts on, with the effective sample size of the
-// larger fit's residuals there (statistics.h): every row of every joint counted as
+// A cause's evidence (Delta BIC) on the outputs it acts on, with the effective sample size of
+// the larger fit's residuals there (statistics.h): every row of every joint counted as
 // independent credits a cause with rows that are not (filtered or autocorrelated residuals),
 // and a joint whose residual is smoother than the others' with their white rows (a clean
 // 7-joint chain had a 0.2 N m ripple named on j0 at Delta BIC 359, its amplitudes within 3
-// robust standard errors of 0). Joining (evidence_holds) and staying (cause_needed) use it alike.
-double Diagnosis::evidence_on_own_joints(int candidate, const Fit& smaller, const Fit& larger) const {
+// robust standard errors of 0). Joining (select) and staying (cause_needed) use it alike.
+bool Diagnosis::evidence_holds(int candidate, const Fit& smaller, const Fit& larger) const {
   const Candidate& c = cands_[static_cast<size_t>(candidate)];
   const std::vector<int> outs = outputs_of(candidate);
   Eigen::VectorXd r(static_cast<Eigen::Index>(outs.size()) * fit_.N);
   for (size_t k = 0; k < outs.size(); ++k) r.segment(static_cast<Eigen::Index>(k) * fit_.N, fit_.N) = larger.residual.segment(outs[k] * fit_.N, fit_.N);
   const double n_eff = static_cast<double>(r.size()) * effective_fraction(r, fit_.N);
   const double dk = larger.rank - smaller.rank + static_cast<double>(c.shape.size());
-  return delta_bic(n_eff, rss_on(smaller.residual, outs, fit_.N), rss_on(larger.residual, outs, fit_.N), dk, rss_floor(fit_.b));
-}
-
-bool Diagnosis::evidence_holds(int candidate, const Fit& smaller, const Fit& larger) const {
-  return evidence_on_own_joints(candidate, smaller, larger) > opt_.bic_threshold;
+  return delta_bic(n_eff, rss_on(smaller.residual, outs, fit_.N), rss_on(larger.residual, outs, fit_.N), dk, rss_floor(fit_.b)) >
+         opt_.bic_threshold;
 }
 
 // Is cause i still needed among the causes `set` (indices into causes_, i's included)?
