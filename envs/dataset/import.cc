@@ -400,10 +400,14 @@ Eigen::VectorXd uniform_grid(const Eigen::VectorXd& t, double dt, const std::str
   return Eigen::VectorXd::LinSpaced(n, t[0], t[0] + dt * static_cast<double>(n - 1));
 }
 
-// Steps 1-5 of Conditioning on the chosen columns (in place), with the time column.
-void condition(const Conditioning& c, const std::string& source, Eigen::VectorXd& t, std::vector<Eigen::VectorXd>& xs,
+// The decimation's low-pass: kAntiAliasShare of the Nyquist frequency after keeping every K-th.
+double anti_alias_cutoff(const Conditioning& c, double dt) { return kAntiAliasShare * 0.5 / (dt * c.decimate); }
+
+// Steps 1-6 of Conditioning on the chosen columns (in place), with the time column. Returns
+// the anti-alias cut-off applied (0: none).
+double condition(const Conditioning& c, const std::string& source, Eigen::VectorXd& t, std::vector<Eigen::VectorXd>& xs,
                std::vector<std::string>& xn, std::vector<Eigen::VectorXd>& ys) {
-  if (!c.any()) return;
+  if (!c.any()) return 0;
   if (t.size() < 3) fail(source + ": filtering, differentiation, edge dropping and decimation need the time column (--t)");
   for (Eigen::Index i = 1; i < t.size(); ++i)
     if (!(t[i] > t[i - 1])) fail(source + ": time stamps must increase; row " + std::to_string(i) + " does not");
@@ -442,6 +446,13 @@ void condition(const Conditioning& c, const std::string& source, Eigen::VectorXd
       }
     }
   }
+  double anti_alias_hz = 0;
+  if (c.decimate > 1 && c.anti_alias) {
+    anti_alias_hz = anti_alias_cutoff(c, dt);
+    const auto sos = butterworth_lowpass(kAntiAliasOrder, anti_alias_hz, 1.0 / dt);
+    for (auto* cols : {&xs, &ys})
+      for (auto& col : *cols) col = filtfilt(sos, col);
+  }
   const Eigen::Index n = t.size(), drop = c.drop_edges;
   if (2 * drop >= n) fail(source + ": --drop-edges " + std::to_string(drop) + " leaves no rows of " + std::to_string(n));
   auto keep = [&](Eigen::VectorXd& v) {
@@ -452,6 +463,7 @@ void condition(const Conditioning& c, const std::string& source, Eigen::VectorXd
   keep(t);
   for (auto* cols : {&xs, &ys})
     for (auto& col : *cols) keep(col);
+  return anti_alias_hz;
 }
 
 // The source column of a spec ("name=source*factor" -> "source").
@@ -502,7 +514,7 @@ Dataset table_to_dataset(const Table& table, const ImportSpec& spec) {
       fail(msg.str());
     }
   }
-  condition(spec.conditioning, table.source, tcol, xs, xn, ys);
+  const double anti_alias_hz = condition(spec.conditioning, table.source, tcol, xs, xn, ys);
   const Eigen::Index N = xs.front().size();
   std::vector<SplitRange> ranges = spec.splits;
   if (ranges.empty()) ranges.push_back({"train", "", ""});
@@ -536,6 +548,9 @@ Dataset table_to_dataset(const Table& table, const ImportSpec& spec) {
   if (spec.conditioning.lowpass_hz > 0)
     ds.provenance["filter"] = lowpass_record_text({spec.conditioning.filter_order, spec.conditioning.lowpass_hz});
   if (spec.conditioning.derive) ds.provenance["derivatives"] = "central-difference";
+  if (spec.conditioning.decimate > 1)
+    ds.provenance["decimation"] = "keep=" + std::to_string(spec.conditioning.decimate) +
+                                  (anti_alias_hz > 0 ? " after " + lowpass_record_text({kAntiAliasOrder, anti_alias_hz}) : " plain");
   validate(ds, table.source);
   return ds;
 }

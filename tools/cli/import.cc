@@ -28,7 +28,10 @@ void add_import(CLI::App& app) {
   cmd->add_option("--filter-order", a->order, "Butterworth order (even)")->capture_default_str();
   cmd->add_flag("--derive", a->spec.conditioning.derive, "add qd:/qdd:<joint> by central differences of q:<joint>");
   cmd->add_option("--drop-edges", a->drop, "samples dropped at each end after filtering/differentiation");
-  cmd->add_option("--decimate", a->decimate, "keep every K-th sample after filtering");
+  cmd->add_option("--decimate", a->decimate, "keep every K-th sample, after a zero-phase anti-alias low-pass (order 8 at 0.8 of the "
+                                             "new Nyquist frequency) on every column");
+  cmd->add_flag("--no-anti-alias", [a](std::int64_t) { a->spec.conditioning.anti_alias = false; },
+                "--decimate keeps every K-th sample without the anti-alias low-pass (raw differences' noise folds into the band)");
   cmd->add_option("--out,-o", a->out, "output spml/1 file")->required();
   cmd->add_option("--x", a->spec.x, "input columns: NAME, NEW=NAME or NEW=NAME*FACTOR (FACTOR: number or .mat scalar)")
       ->required()->delimiter(',');

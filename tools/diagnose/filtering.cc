@@ -51,6 +51,8 @@ FilterPlan plan_filter(const Dataset& ds, const std::vector<Eigen::VectorXd>& q,
     notes.push_back("the dataset's filter attribute '" + it->second + "' is not understood: no parallel filtering");
     return plan;
   }
+  const auto derived = ds.provenance.find("derivatives");
+  plan.raw_differences = derived != ds.provenance.end() && derived->second == "central-difference";
   if (!(rate_hz > 0)) return plan;
   const double band = excitation_band(q, rate_hz);
   if (!(band > 0)) return plan;
@@ -59,6 +61,7 @@ FilterPlan plan_filter(const Dataset& ds, const std::vector<Eigen::VectorXd>& q,
   for (const auto& x : qdd) worst = std::max(worst, cutoff < 0.4 * rate_hz ? power_above(x, cutoff, rate_hz) : 0.0);
   if (worst <= 0.05) return plan;
   plan.source = FilterPlan::Source::detected;
+  plan.raw_differences = true;
   plan.lowpass = {4, cutoff};
   plan.torques = true;
   plan.description = "the accelerations hold " + text(100 * worst) + " % of their power above " + text(cutoff) +

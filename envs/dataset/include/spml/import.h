@@ -49,14 +49,23 @@ SplitRange parse_split_range(const std::string& text);
 //   3. derive: for every X column q:<joint>, qd:<joint> by central differences of q unless
 //      X has it (measured velocities are kept, filtered), and qdd:<joint> by central
 //      differences of qd;
-//   4. drop_edges samples removed at each end (filter and difference transients);
-//   5. every decimate-th sample kept (the low-pass doubles as anti-aliasing filter).
+//   4. decimate > 1 (and anti_alias): zero-phase Butterworth low-pass of order kAntiAliasOrder
+//      at kAntiAliasShare of the decimated Nyquist frequency on every X and Y column;
+//   5. drop_edges samples removed at each end (filter and difference transients);
+//   6. every decimate-th sample kept.
+constexpr int kAntiAliasOrder = 8;
+constexpr double kAntiAliasShare = 0.8;
+
 struct Conditioning {
   double lowpass_hz = 0;
   int filter_order = 4;
   bool derive = false;
   int drop_edges = 0;
   int decimate = 1;
+  // Step 4, as signal processing means decimation: keeping every K-th sample of raw
+  // differences alone folds their noise, which lies near the old Nyquist frequency, into the
+  // band (the parallel decimation of IDIM, Gautier 1997). false: plain subsampling.
+  bool anti_alias = true;
   bool any() const { return lowpass_hz > 0 || derive || drop_edges > 0 || decimate > 1; }
 };
 
