@@ -396,15 +396,17 @@ TEST(DiagnoseBeyond, CubicDampingAndAnEndStopAreReportedUnexplainedOnTheirInput)
 
 // A probe over seeds, for the tables of the issue (not run by ctest: --gtest_also_run_disabled_tests).
 // SPML_BEYOND_KIND: a kind of make_draw; SPML_BEYOND_FIRST, SPML_BEYOND_SEEDS: the seeds;
-// SPML_BEYOND_DELAY_MS; SPML_BEYOND_NOISE (torque noise fraction); SPML_BEYOND_BITS.
+// SPML_BEYOND_DELAY_MS; SPML_BEYOND_NOISE (torque noise fraction); SPML_BEYOND_BITS;
+// SPML_BEYOND_LOWPASS (the import's low-pass in Hz, default 10; 0: raw differences).
 TEST(DiagnoseBeyond, DISABLED_SeedTable) {
   auto env = [](const char* k, const char* d) { const char* v = std::getenv(k); return std::string(v ? v : d); };
   const std::string kind = env("SPML_BEYOND_KIND", "clean");
   const int seeds = std::stoi(env("SPML_BEYOND_SEEDS", "5")), first = std::stoi(env("SPML_BEYOND_FIRST", "0"));
   const auto dir = test::temp_dir("table");
   for (int s = first; s < first + seeds; ++s) {
-    const Draw d = make_draw(dir, kind, s, std::stod(env("SPML_BEYOND_DELAY_MS", "5")),
-                             noise_level(std::stod(env("SPML_BEYOND_NOISE", "0.01")), std::stoi(env("SPML_BEYOND_BITS", "18"))));
+    Measurement m = noise_level(std::stod(env("SPML_BEYOND_NOISE", "0.01")), std::stoi(env("SPML_BEYOND_BITS", "18")));
+    m.lowpass_hz = std::stod(env("SPML_BEYOND_LOWPASS", "10"));
+    const Draw d = make_draw(dir, kind, s, std::stod(env("SPML_BEYOND_DELAY_MS", "5")), m);
     const auto r = run_draw(dir, d, s);
     std::cout << "TABLE " << kind << " seed " << s << " joint j" << d.joint << " other j" << d.other << " (" << d.what << "): delay "
               << 1e3 * r["delay"]["seconds"].get<double>() << " ± " << 1e3 * r["delay"]["stderr"].get<double>() << " ms named "

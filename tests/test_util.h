@@ -103,9 +103,10 @@ inline std::string with_declarations(std::string xml, const std::vector<std::str
 }
 
 // One hidden effect of the plugin vocabulary on `joint`, its size 8-14 times `sigma`; the
-// linear parameters the data should give back go into truth["effect@joint.param"].
+// linear parameters the data should give back go into truth["effect@joint.param"]. A ripple's
+// wavenumber is drawn from min_gear .. min_gear + 30.
 inline std::string effect_text(const std::string& effect, const std::string& joint, double sigma, std::mt19937_64& rng,
-                               std::map<std::string, double>& truth) {
+                               std::map<std::string, double>& truth, int min_gear = 3) {
   std::uniform_real_distribution<double> k(8, 14), u(0, 1);
   const double a = k(rng) * sigma;
   const std::string key = effect + "@" + joint;
@@ -125,7 +126,7 @@ inline std::string effect_text(const std::string& effect, const std::string& joi
     return "type=friction_band joints=" + joint + " lower=" + num(lo) + " upper=" + num(lo + w) + " level=" + num(a);
   }
   if (effect == "ripple") {
-    const int gear = 3 + static_cast<int>(u(rng) * 30);
+    const int gear = min_gear + static_cast<int>(u(rng) * 30);
     return "type=ripple joints=" + joint + " gear=" + std::to_string(gear) + " harmonics=1 amplitudes=" + num(a) + " phases=" + num(6 * u(rng));
   }
   if (effect == "asymmetric_friction") {
