@@ -212,9 +212,11 @@ std::string Diagnosis::injects_energy(const Candidate& c, const Eigen::VectorXd&
   return "";
 }
 
-std::string Diagnosis::refused(int candidate, const Eigen::VectorXd& theta) const {
-  const Candidate& c = cands_[static_cast<size_t>(candidate)];
-  if (c.stateful) return theta.size() == 1 && theta[0] > 0 ? "" : "the simulated force would enter with a negative amplitude";   // #22
+// The signs an effect's own form needs, checked on its fitted coefficients: by refused() and,
+// at every shape, by the shape search (shape_search.cc) - else the search settles where the
+// fit leaves the form (a Stribeck speed at the bottom of its range, vs 0.004 rad/s, with fs
+// < fc, refused after, where the hidden curve had vs 0.29 rad/s and fs 3 fc).
+std::string Diagnosis::outside_its_form(const Candidate& c, const Eigen::VectorXd& theta) {
   // A Stribeck curve falls from its break-away level fs to the Coulomb level fc. Fitted with
   // fs < fc it is friction lower at low speed: the stick phases of Coulomb friction (the joint
   // held while the applied torque is below fc, read through estimated velocities), not Stribeck.
@@ -229,6 +231,13 @@ std::string Diagnosis::refused(int candidate, const Eigen::VectorXd& theta) cons
     for (Eigen::Index k = 0; k + 1 < theta.size(); k += 2)
       if (!(theta[k] > 0))
         return "k " + fmt(theta[k]) + " <= 0: not a spring (a negative stiffness pushes the joint away from its rest position)";
+  return "";
+}
+
+std::string Diagnosis::refused(int candidate, const Eigen::VectorXd& theta) const {
+  const Candidate& c = cands_[static_cast<size_t>(candidate)];
+  if (c.stateful) return theta.size() == 1 && theta[0] > 0 ? "" : "the simulated force would enter with a negative amplitude";   // #22
+  if (std::string form = outside_its_form(c, theta); !form.empty()) return form;
   const std::string pumping = injects_energy(c, theta);
   if (!pumping.empty()) return pumping;
   try {

@@ -166,13 +166,16 @@ Gain gain_of(const BlockColumns& C, const Eigen::MatrixXd& Q, const Eigen::Vecto
   Eigen::MatrixXd G = scale.asDiagonal() * (CtC - QtC.transpose() * QtC) * scale.asDiagonal();
   g = scale.asDiagonal() * g;
   Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(G);
+  out.coef = Eigen::VectorXd::Zero(G.rows());
   for (Eigen::Index k = 0; k < G.rows(); ++k) {
     const double lambda = eig.eigenvalues()[k];
     if (lambda <= kRankTolerance * kRankTolerance) continue;
     const double proj = eig.eigenvectors().col(k).dot(g);
     out.rss_drop += proj * proj / lambda;
+    out.coef += eig.eigenvectors().col(k) * (proj / lambda);
     ++out.rank;
   }
+  out.coef = scale.asDiagonal() * out.coef;
   out.rss_drop = std::min(out.rss_drop, r.squaredNorm());
   return out;
 }

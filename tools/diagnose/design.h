@@ -49,6 +49,7 @@ Fit iv_fit_blocks(const std::vector<const BlockColumns*>& blocks, const std::vec
 struct Gain {
   double rss_drop = 0;
   int rank = 0;
+  Eigen::VectorXd coef;   // the columns' least-squares coefficients (minimum norm where they are collinear with Q)
 };
 Gain gain_of(const BlockColumns& C, const Eigen::MatrixXd& Q, const Eigen::VectorXd& r);
 

@@ -184,6 +184,7 @@ class Diagnosis {
   // "" when the plugin accepts its fitted parameters (written back through write_config and
   // created again), else its reason: a negative band level is not a friction band.
   std::string refused(int candidate, const Eigen::VectorXd& theta) const;
+  static std::string outside_its_form(const Candidate& c, const Eigen::VectorXd& theta);
   std::string injects_energy(const Candidate& c, const Eigen::VectorXd& theta) const;
   bool within_damping(const Eigen::VectorXd& col, int joint, double coef) const;
   // shape_search.cc

@@ -156,6 +156,9 @@ double Diagnosis::search_shape(Candidate& c, const Fit& current) {
       BlockColumns cols = columns(inst, fit_);
       Gain g = gain_of(cols, current.Q, current.residual);
       if (keep) *keep = std::move(cols);
+      // A shape where the fit leaves the effect's form (fs < fc) is no candidate shape: the
+      // search looks for the best one inside it.
+      if (!keep && g.rank > 0 && !outside_its_form(c, g.coef).empty()) return Gain{};
       return g;
     } catch (const PluginError&) {
       return Gain{};   // a shape the plugin refuses (lower >= upper): not a candidate
