@@ -4,7 +4,9 @@
 
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <random>
+#include <sstream>
 
 #include "diagnose_draws.h"
 #include "diagnosis.h"
@@ -65,6 +67,63 @@ TEST(DiagnoseCases, RerunWithoutPlotsLeavesNoOldPlotsAndNoStaging) {
   // The report and the extended model are of one run: the report names this run's data.
   const auto rep = nlohmann::json::parse(test::read_file((out / "report.json").string()));
   EXPECT_EQ(rep["data"], c.data);
+}
+
+// rollouts.csv: the traced windows' trajectories are the rollouts report.json scores. Each starts
+// at the measured state and ends at the window's end error of either model; a rerun without
+// rollouts leaves no rollouts.csv of the last run.
+TEST(DiagnoseCases, RolloutTrajectoriesEndAtTheReportedErrors) {
+  const auto dir = test::temp_dir("dc-rollouts");
+  const Case c = make_case(dir);
+  const fs::path out = dir / "out";
+  DiagnoseOptions o;
+  o.model = c.model;
+  o.data = c.data;
+  o.rollouts = 7;
+  o.rollout_seconds = 0.05;
+  const nlohmann::json ro = diagnose(o, out.string()).report["rollout"];
+  ASSERT_TRUE(ro.contains("traced")) << ro.dump(1);
+  std::istringstream csv(test::read_file((out / "rollouts.csv").string()));
+  std::string line;
+  std::getline(csv, line);
+  EXPECT_EQ(line, "window,t,q:j0,given:j0,extended:j0,q:j1,given:j1,extended:j1");
+  std::vector<int> windows;
+  std::map<int, std::vector<std::vector<double>>> rows;   // per window: its samples
+  while (std::getline(csv, line)) {
+    std::vector<double> v;
+    std::istringstream cells(line);
+    for (std::string cell; std::getline(cells, cell, ',');) v.push_back(std::stod(cell));
+    ASSERT_EQ(v.size(), 8u) << line;
+    const int w = static_cast<int>(v[0]);
+    if (rows.find(w) == rows.end()) windows.push_back(w);
+    rows[w].push_back(v);
+  }
+  ASSERT_EQ(windows.size(), ro["traced"].size()) << ro["traced"].dump(1);
+  EXPECT_GE(windows.size(), 2u);
+  EXPECT_LE(windows.size(), 3u);
+  auto near = [](double a, double b) { return std::fabs(a - b) <= 1e-9 * std::max(std::fabs(b), 1e-300); };
+  for (size_t k = 0; k < windows.size(); ++k) {
+    const int w = windows[k];
+    const auto& rec = ro["traced"][k];
+    EXPECT_EQ(rec["window"].get<int>(), w);
+    const auto& first = rows[w].front();
+    const auto& last = rows[w].back();
+    EXPECT_NEAR(last[1] - first[1], o.rollout_seconds, 1e-3) << "window " << w;
+    EXPECT_EQ(first[1], rec["start_s"].get<double>()) << "window " << w;
+    for (size_t j = 0; j < c.joints.size(); ++j) {
+      const size_t q = 2 + 3 * j;
+      EXPECT_EQ(first[q + 1], first[q]) << "window " << w << " " << c.joints[j] << ": the model as given starts off the measured state";
+      EXPECT_EQ(first[q + 2], first[q]) << "window " << w << " " << c.joints[j] << ": extended.xml starts off the measured state";
+      const double before = rec["error_before"][c.joints[j]].get<double>();
+      const double after = rec["error_after"][c.joints[j]].get<double>();
+      EXPECT_GT(before, 0) << "window " << w << " " << c.joints[j] << ": nothing to compare";
+      EXPECT_TRUE(near(std::fabs(last[q + 1] - last[q]), before)) << "window " << w << " " << c.joints[j] << ": " << last[q + 1] - last[q] << " vs " << before;
+      EXPECT_TRUE(near(std::fabs(last[q + 2] - last[q]), after)) << "window " << w << " " << c.joints[j] << ": " << last[q + 2] - last[q] << " vs " << after;
+    }
+  }
+  o.rollouts = 0;
+  diagnose(o, out.string());
+  EXPECT_FALSE(fs::exists(out / "rollouts.csv")) << "a run without rollouts left the last run's rollouts.csv";
 }
 
 TEST(DiagnoseCases, NonUtf8PathFailsBeforeWritingAnything) {

@@ -123,6 +123,14 @@ def diagnose_figures():
                                           "position_error_after": {"a": 0.0057, "b": 0.0027}}}
     with open(os.path.join(folder, "report.json"), "w") as f:
         json.dump(report, f)
+    # Two traced windows of 0.1 s at 1 ms: measured, as given (drifting), extended (closer).
+    with open(os.path.join(folder, "rollouts.csv"), "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["window", "t"] + [f"{k}:{j}" for j in "ab" for k in ("q", "given", "extended")])
+        for window, t0 in ((7, 3.0), (2, 1.0)):
+            for k in range(101):
+                s = k / 1000.0
+                w.writerow([window, t0 + s] + [v for j in range(2) for v in (math.sin(s + j), math.sin(s + j) + s * s, math.sin(s + j) + 0.1 * s * s)])
     saved = {}
     real = matplotlib.figure.Figure.savefig
     matplotlib.figure.Figure.savefig = lambda fig, path, **kw: saved.setdefault(os.path.basename(path), fig)
@@ -130,7 +138,7 @@ def diagnose_figures():
         diagnose_plots.main(folder)
     finally:
         matplotlib.figure.Figure.savefig = real
-    check(set(saved) == {"residuals.png", "states.png", "rollouts.png"}, f"diagnose figures: {sorted(saved)}")
+    check(set(saved) == {"residuals.png", "states.png", "rollouts.png", "rollouts_trajectories.png"}, f"diagnose figures: {sorted(saved)}")
     for name, fig in saved.items():
         labelled(fig, name)
         print(f"checked {name}: x = {fig.axes[-1].get_xlabel()!r}, y = {[a.get_ylabel() for a in fig.axes]}")
@@ -149,10 +157,32 @@ def diagnose_figures():
     check("rad or m" in ro.get_ylabel(), f"rollouts.png: y label '{ro.get_ylabel()}' (a hinge and a slide)")
     check("after 0.1 s" in ro.get_ylabel(), f"rollouts.png: y label '{ro.get_ylabel()}' does not give the horizon in s")
     check(ro.get_yscale() == "linear", "rollouts.png: errors within a decade on a log axis")
+    trajectories(saved["rollouts_trajectories.png"])
     title = res.axes[0].get_title().replace("\n", " ")
     check("binned by time" in title and "800 bins of 50 samples (0.05 s)" in title,
           f"residuals.png: the title '{title}' does not say how the 40 000 samples were binned")
     rollouts_over_decades()
+
+
+def trajectories(fig):
+    """rollouts_trajectories.png: a column per traced window in file order, per joint its positions
+    (measured, as given, extended) and simulated − measured, in the joint's unit, against the time
+    into the window."""
+    axes = fig.axes
+    check(len(axes) == 8, f"rollouts_trajectories.png: {len(axes)} axes, not 2 joints x 2 rows x 2 windows")
+    grid = np.array(axes).reshape(4, 2)
+    check("window 7" in grid[0, 0].get_title() and "window 2" in grid[0, 1].get_title(),
+          f"rollouts_trajectories.png: columns {grid[0, 0].get_title()!r}, {grid[0, 1].get_title()!r} not in file order")
+    for row, (j, unit) in enumerate((("a", "rad"), ("a", "rad"), ("b", "m"), ("b", "m"))):
+        check(f"[{unit}]" in grid[row, 0].get_ylabel(), f"rollouts_trajectories.png: y label {grid[row, 0].get_ylabel()!r} without {unit}")
+    top, bottom = grid[2, 1], grid[3, 1]   # joint b, window 2
+    xs = top.lines[0].get_xdata()
+    check(abs(xs[0]) < 1e-12 and abs(xs[-1] - 0.1) < 1e-9, f"rollouts_trajectories.png: x from {xs[0]} to {xs[-1]}, not 0..0.1 s")
+    check(abs(top.lines[0].get_ydata()[-1] - math.sin(1.1)) < 1e-12, "rollouts_trajectories.png: the measured line is not q:b")
+    drift = bottom.lines[0].get_ydata()[-1]
+    check(abs(drift - 0.01) < 1e-9, f"rollouts_trajectories.png: as given ends {drift} from the measured, not 0.01")
+    check(grid[-1, 0].get_xlabel() == "time into the window [s]", f"rollouts_trajectories.png: x label {grid[-1, 0].get_xlabel()!r}")
+    print(f"checked rollouts_trajectories.png: {len(axes)} axes, y = {[a.get_ylabel() for a in axes[:4]]}")
 
 
 def rollouts_over_decades():

@@ -69,7 +69,7 @@ void add_diagnose(CLI::App& app) {
   cmd->add_option("--holdout", o->holdout, "fraction held out (time-ordered) when the dataset has one split")
       ->capture_default_str()->check(finite_number(0.05, 0.9));
   cmd->add_option("--cross", o->cross, "another dataset (e.g. a validation record) scored before, after each cause and after all; repeatable");
-  cmd->add_option("--out,-o", *out, "output folder: report.json, report.md, extended.xml, series.csv, plots/")->required();
+  cmd->add_option("--out,-o", *out, "output folder: report.json, report.md, extended.xml, series.csv, rollouts.csv, plots/")->required();
   cmd->add_option("--plugin-path", *paths, "extra force-plugin library or folder: its plugins are candidates too (also $SPML_PLUGIN_PATH)");
   cmd->add_option("--bic-threshold", o->bic_threshold, "evidence a cause needs on the fit split (Delta BIC)")
       ->capture_default_str()->check(finite_number(0.0, 1e9));
@@ -108,7 +108,9 @@ void add_diagnose(CLI::App& app) {
     const auto& t = r.report["timings_s"];
     std::cout << "  time: search " << t["search"].get<double>() << " s, refits " << t["refits"].get<double>() << " s, rollouts "
               << t["rollouts"].get<double>() << " s, load " << t["load"].get<double>() << " s, outputs " << t["outputs"].get<double>() << " s\n";
-    std::cout << "  wrote " << *out << "/report.json, report.md, extended.xml, series.csv" << (*no_plots ? "" : ", plots/") << "\n";
+    const bool traced = r.report.contains("rollout") && r.report["rollout"].contains("traced");   // rollouts.csv written
+    std::cout << "  wrote " << *out << "/report.json, report.md, extended.xml, series.csv" << (traced ? ", rollouts.csv" : "")
+              << (*no_plots ? "" : ", plots/") << "\n";
   });
 }
 

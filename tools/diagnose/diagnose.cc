@@ -60,9 +60,9 @@ namespace {
 namespace fs = std::filesystem;
 // In the order they are moved into place: report.json last, so that a reader who sees it sees
 // the rest of the same run.
-const char* const kOutputs[] = {"extended.xml", "series.csv", "unexplained.csv", "report.md", "report.json"};
+const char* const kOutputs[] = {"extended.xml", "series.csv", "unexplained.csv", "rollouts.csv", "report.md", "report.json"};
 // The figures tools/plots/diagnose_plots.py draws into plots/.
-const char* const kPlots[] = {"residuals.png", "states.png", "rollouts.png", "unexplained.png"};
+const char* const kPlots[] = {"residuals.png", "states.png", "rollouts.png", "rollouts_trajectories.png", "unexplained.png"};
 
 // The same file-identity check as generate, import and bench (spml/output_guard.h).
 void refuse_inputs_among_outputs(const DiagnoseOptions& o, const fs::path& out) {
@@ -96,8 +96,10 @@ void publish(const fs::path& staged, const fs::path& out) {
     for (const auto& f : fs::directory_iterator(staged / "plots")) fs::rename(f.path(), out / "plots" / f.path().filename());
   }
   fs::remove(out / "plots", ec);   // only when it is left empty
+  // An output this run did not write (rollouts.csv without rollouts) must not stay from the last.
   for (const char* name : kOutputs)
     if (fs::exists(staged / name)) fs::rename(staged / name, out / name);
+    else fs::remove(out / name, ec);
   if (fd >= 0) {
     ::flock(fd, LOCK_UN);
     ::close(fd);

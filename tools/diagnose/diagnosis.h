@@ -11,7 +11,7 @@
 //   written_parameters.cc  the physically consistent parameters extended.xml states
 //   written_form.cc  a spring and viscous friction written as MuJoCo's stiffness/springref and damping
 //   confirm.cc     causes whose written form makes rollouts worse beyond noise are rejected
-//   verify.cc      the written model: extended.xml, its own inverse dynamics, rollouts
+//   verify.cc      the written model: extended.xml, its own inverse dynamics, rollouts (rollouts.csv)
 //   report_json.cc report.json (causes, metrics, cross-tests) and series.csv
 // Issue #22 (stages of their own, hooked in where marked "#22"):
 //   delay.cc       an offset between torques and states, estimated and corrected first
@@ -259,7 +259,7 @@ class Diagnosis {
   bool refit_written_effects(const std::string& ext_path, MjcfEdits& edits, std::vector<std::string>& notes);
   void guard_held_out(const std::string& ext_path, MjcfEdits& edits, std::vector<std::string>& notes,
                       std::pair<Eigen::VectorXd, Eigen::VectorXd>& written);
-  void run_rollouts(const std::string& ext_path, std::vector<std::string>& notes);
+  void run_rollouts(const std::string& ext_path, const std::string& out_dir, std::vector<std::string>& notes);
   Eigen::VectorXd written_prediction(const MjcfRegressor& ext, const MjcfRegressor::Base& ebase, const SplitData& s) const;
 
   DiagnoseOptions opt_;

@@ -139,6 +139,8 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
   }
   if (with_plots) s << "\n## Plots\n\n![residuals](plots/residuals.png)\n\n![states](plots/states.png)\n";
   if (with_plots && r.contains("rollout") && r["rollout"].contains("position_error_before")) s << "\n![rollouts](plots/rollouts.png)\n";
+  if (with_plots && r.contains("rollout") && !r["rollout"].value("traced", nlohmann::json::array()).empty())   // rollouts.csv
+    s << "\n![rollout trajectories](plots/rollouts_trajectories.png)\n";
   if (with_plots && r.value("unexplained", nlohmann::json::array()).size() > 0)   // #22
     s << "\n![unexplained](plots/unexplained.png)\n";
   return s.str();

@@ -1,6 +1,6 @@
 // Stage 6, verification: the written model. extended.xml is written from the edits, reloaded,
 // and its own inverse dynamics must reproduce the final prediction; rollouts of the model as
-// given and of extended.xml under the measured torques.
+// given and of extended.xml under the measured torques, a few windows' trajectories in rollouts.csv.
 #include <filesystem>
 #include <unistd.h>
 
@@ -106,17 +106,39 @@ std::pair<Eigen::VectorXd, Eigen::VectorXd> Diagnosis::verify(const std::string&
   R["needs_spml_plugins"] = report_written_form(edits, notes);   // what stays a plugin text (written_form.cc)
   result_.timings.outputs += since(t0);
   t0 = Clock::now();
-  run_rollouts(ext_path, notes);
+  run_rollouts(ext_path, out_dir, notes);
   if (out_dir.empty()) fs::remove(ext_path);
   result_.timings.rollouts += since(t0);
   return written;
 }
 
+namespace {
+
+// report.json's rollout.traced: the windows in rollouts.csv, each with its start and both models'
+// end errors per joint (what the last row of the window in rollouts.csv shows).
+nlohmann::json traced_windows(const RolloutResult& before, const RolloutResult& after, const std::vector<int>& traced) {
+  nlohmann::json out = nlohmann::json::array();
+  for (const int w : traced) {
+    const auto k = static_cast<size_t>(w);
+    nlohmann::json b = nlohmann::json::object(), a = nlohmann::json::object();
+    for (size_t j = 0; j < before.joints.size(); ++j) {
+      b[before.joints[j]] = before.window_error[k][j];
+      a[after.joints[j]] = after.window_error[k][j];
+    }
+    out.push_back({{"window", w}, {"start_s", before.window_start[k]}, {"error_before", b}, {"error_after", a}});
+  }
+  return out;
+}
+
+}  // namespace
+
 // Rollouts of the model as given and of extended.xml; joints whose rollouts the written model
-// makes worse are listed (worse_on) and said in the notes.
-void Diagnosis::run_rollouts(const std::string& ext_path, std::vector<std::string>& notes) {
+// makes worse are listed (worse_on) and said in the notes. A few windows' trajectories go to
+// rollouts.csv (windows_to_trace: the worst of the model as given, a median one, the best).
+void Diagnosis::run_rollouts(const std::string& ext_path, const std::string& out_dir, std::vector<std::string>& notes) {
   nlohmann::json& R = result_.report;
   if (opt_.rollouts <= 0) return;
+  std::string csv;
   try {
     const RolloutResult before = rollout(opt_.model, test_.split, opt_.rollouts, opt_.rollout_seconds, test_.runs);
     const RolloutResult after = rollout(ext_path, test_.split, opt_.rollouts, opt_.rollout_seconds, test_.runs);
@@ -127,14 +149,21 @@ void Diagnosis::run_rollouts(const std::string& ext_path, std::vector<std::strin
       if (!(after.position_error[j] <= before.position_error[j])) worse.push_back(before.joints[j]);
     }
     const nlohmann::json rejected = rejected_causes(R["causes"]);
+    const std::vector<int> traced = windows_to_trace(before);
     R["rollout"] = {{"split", test_name_}, {"horizon_s", opt_.rollout_seconds}, {"windows", before.windows},
-                    {"position_error_before", b}, {"position_error_after", a}, {"worse_on", worse}, {"rejected", rejected}};
+                    {"position_error_before", b}, {"position_error_after", a}, {"worse_on", worse}, {"rejected", rejected},
+                    {"traced", traced_windows(before, after, traced)}};
     if (!worse.empty())
       notes.push_back("rollouts of extended.xml end farther from the measured positions than the model as given on " + worse.dump() +
                       " (rollout.worse_on): the causes on those joints are not confirmed in simulation");
+    if (!out_dir.empty())
+      csv = rollout_csv(before.joints, rollout_traces(opt_.model, test_.split, opt_.rollouts, opt_.rollout_seconds, test_.runs, traced),
+                        rollout_traces(ext_path, test_.split, opt_.rollouts, opt_.rollout_seconds, test_.runs, traced));
   } catch (const std::exception& e) {
     R["rollout"] = {{"skipped", e.what()}};
   }
+  // Outside the try: a file that cannot be written is an error, not a skipped rollout.
+  if (!csv.empty()) write_text_atomic((std::filesystem::path(out_dir) / "rollouts.csv").string(), csv);
 }
 
 }  // namespace spml::diagnose_detail

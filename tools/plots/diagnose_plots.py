@@ -10,7 +10,10 @@
   rollouts.png   (when report.json has rollouts) open-loop rollouts under the measured torques:
                  the position error at the end of the horizon (s), model as given and extended,
                  in rad or m; a log axis when the errors lie a decade or more apart
-Reads DIR/series.csv and DIR/report.json (written by diagnose). Units come from each joint's
+  rollouts_trajectories.png (when DIR/rollouts.csv exists) a few of those windows over time, one
+                 column each: per joint the measured position and the positions simulated by the
+                 model as given and by the extended model, and below it simulated − measured
+Reads DIR/series.csv, DIR/rollouts.csv and DIR/report.json (written by diagnose). Units come from each joint's
 type in the model file report.json names (hinge: N·m, rad; slide/prismatic: N, m)."""
 import csv
 import json
@@ -152,6 +155,64 @@ def rollout_figure(report, units, out):
     return True
 
 
+def read_trajectories(path):
+    """rollouts.csv as (joints, {window: {column: array}}), windows in file order."""
+    with open(path) as f:
+        rows = list(csv.reader(f))
+    head = rows[0]
+    joints = [name[2:] for name in head if name.startswith("q:")]
+    windows = {}
+    for r in rows[1:]:
+        windows.setdefault(int(r[0]), []).append([float(v) for v in r[1:]])
+    return joints, {w: {name: np.array(c) for name, c in zip(head[1:], zip(*v))} for w, v in windows.items()}
+
+
+def trajectory_figure(folder, report, out):
+    """A few rollout windows over time (DIR/rollouts.csv): per joint a row of positions - measured,
+    simulated by the model as given, by the extended model - and a row of simulated − measured
+    (the drift, which on the position scale is often thinner than a line), a column per window."""
+    path = os.path.join(folder, "rollouts.csv")
+    if not os.path.exists(path):
+        return False
+    joints, windows = read_trajectories(path)
+    if not joints or not windows:
+        return False
+    units = joint_units(report.get("model"), joints)
+    ro = report.get("rollout", {})
+    height = 2.6 * len(joints) + 1.2
+    fig, axes = plt.subplots(2 * len(joints), len(windows), figsize=(3.6 * len(windows) + 1, height), sharex="col", squeeze=False)
+    for c, (w, v) in enumerate(windows.items()):
+        t = v["t"] - v["t"][0]
+        for k, j in enumerate(joints):
+            unit = units[j]["position"]
+            top, bottom = axes[2 * k, c], axes[2 * k + 1, c]
+            top.plot(t, v["q:" + j], color="black", lw=1.2, label="measured")
+            for key, color, name in (("given", "tab:red", "model as given"), ("extended", "tab:blue", "extended model")):
+                top.plot(t, v[key + ":" + j], color=color, lw=0.9, ls="--", label=name)
+                bottom.plot(t, v[key + ":" + j] - v["q:" + j], color=color, lw=0.9, label=name)
+            bottom.axhline(0, color="black", lw=0.5)
+            ends = [abs(v[key + ":" + j][-1] - v["q:" + j][-1]) for key in ("given", "extended")]
+            bottom.set_title(f"|error| at the end: as given {ends[0]:.3g} {unit}, extended {ends[1]:.3g} {unit}", fontsize=7)
+            top.set_ylabel(f"q:{j} [{unit}]", fontsize=8)
+            bottom.set_ylabel(f"simulated − measured [{unit}]", fontsize=8)
+            for ax in (top, bottom):
+                ax.grid(alpha=0.3)
+                ax.tick_params(labelsize=7)
+        axes[0, c].set_title(f"window {w} (from t = {v['t'][0]:.4g} s)", fontsize=9)
+        axes[-1, c].set_xlabel("time into the window [s]")
+    axes[0, 0].legend(fontsize=7, loc="best")
+    fig.suptitle("\n".join(textwrap.wrap(
+        f"open-loop rollouts under the measured torques from measured states, {len(windows)} of "
+        f"{ro.get('windows', '?')} windows on '{ro.get('split', '?')}' (the largest end error first)", 90)), fontsize=10)
+    fig.tight_layout()
+    # Many rows: tight_layout leaves the two-line suptitle (its top at 0.98) over the column
+    # titles; both take about 0.65 in.
+    fig.subplots_adjust(top=min(fig.subplotpars.top, 0.98 - 0.65 / height))
+    fig.savefig(os.path.join(out, "rollouts_trajectories.png"), dpi=100)
+    plt.close(fig)
+    return True
+
+
 def main(folder):
     with open(os.path.join(folder, "series.csv")) as f:
         rows = list(csv.reader(f))
@@ -170,6 +231,7 @@ def main(folder):
     residual_figure(t, test, col, joints, units, out)
     states_figure(t, test, col, joints, units, out)
     rollout_figure(report, units, out)
+    trajectory_figure(folder, report, out)
     unexplained_figure(folder, units, out)
 
 
