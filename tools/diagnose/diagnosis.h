@@ -242,6 +242,8 @@ class Diagnosis {
                          const std::vector<double>& ub, std::vector<double>& x) const;
   void polish_stateful(const Candidate& c, const Fit& current, const std::vector<double>& lb, const std::vector<double>& ub, int passes,
                        std::vector<double>& x) const;
+  std::vector<std::vector<double>> grid_starts(const Candidate& c, const Fit& current, const std::vector<bool>& level,
+                                               const std::vector<double>& lb, const std::vector<double>& ub, const std::vector<double>& x) const;
   int stateful_rival(int accepted, const std::vector<int>& order, const std::vector<int>& chosen, Fit& next, Eigen::VectorXd& next_test);
   void settle_levels(Candidate& c, const Fit& current, const std::vector<bool>& level, std::vector<double>& x);
   void stateful_errors(Candidate& c, const Fit& current, const std::vector<double>& x);

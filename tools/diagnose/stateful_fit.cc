@@ -220,11 +220,51 @@ void Diagnosis::fit_stateful(Candidate& c, const Fit& current) {
   const double n = static_cast<double>(fit_.y0.size());
   const bool polish = std::isfinite(scanned) && scanned > 0 &&
                       delta_bic(n, current.rss, current.rss - scanned, static_cast<double>(ns) + 1, rss_floor(fit_.b)) > opt_.bic_threshold;
-  polish_stateful(c, current, lb, ub, polish ? 2 : 0, x);
+  if (polish) {
+    polish_stateful(c, current, lb, ub, 2, x);
+    double best = stateful_drop(c, current, x);
+    for (std::vector<double>& start : grid_starts(c, current, level, lb, ub, x)) {
+      polish_stateful(c, current, lb, ub, 1, start);
+      if (const double g = stateful_drop(c, current, start); g > best) best = g, x = start;
+    }
+  }
   stateful_errors(c, current, x);
   c.shape_values.resize(ns);
   for (size_t k = 0; k < ns; ++k) c.shape_values[k] = std::exp(x[k]);
   settle_levels(c, current, level, x);
+}
+
+// The three best points of a coarse grid over the keys that are not levels (5 per key, cell
+// centres of their log ranges; the levels held at x's), as further starts of the polish: the
+// two starts of fit_stateful both led one LuGre draw to a Stribeck speed of 1.29 rad/s (truth
+// 0.09) with fc and fs 23 and 34 % low, a basin whose held-out error (0.389 %) the true
+// parameters beat (0.363 %).
+std::vector<std::vector<double>> Diagnosis::grid_starts(const Candidate& c, const Fit& current, const std::vector<bool>& level,
+                                                        const std::vector<double>& lb, const std::vector<double>& ub,
+                                                        const std::vector<double>& x) const {
+  constexpr int kPerKey = 5, kStarts = 3;
+  std::vector<size_t> keys;
+  for (size_t k = 0; k < x.size(); ++k)
+    if (!level[k]) keys.push_back(k);
+  size_t total = 1;
+  for (size_t i = 0; i < keys.size(); ++i) total *= kPerKey;
+  if (keys.empty() || total > 625) return {};
+  std::vector<std::pair<double, std::vector<double>>> scored;
+  for (size_t idx = 0; idx < total; ++idx) {
+    std::vector<double> p = x;
+    size_t rest = idx;
+    for (size_t k : keys) {
+      p[k] = lb[k] + (ub[k] - lb[k]) * (static_cast<double>(rest % kPerKey) + 0.5) / kPerKey;
+      rest /= kPerKey;
+    }
+    if (const double g = stateful_drop(c, current, p); std::isfinite(g)) scored.emplace_back(g, std::move(p));
+  }
+  const auto n = std::min<size_t>(kStarts, scored.size());
+  std::partial_sort(scored.begin(), scored.begin() + static_cast<std::ptrdiff_t>(n), scored.end(),
+                    [](const auto& a, const auto& b) { return a.first > b.first; });
+  std::vector<std::vector<double>> out;
+  for (size_t i = 0; i < n; ++i) out.push_back(std::move(scored[i].second));
+  return out;
 }
 
 // Subplex on the drop, `passes` times: restarted from its own end point it leaves a valley it
