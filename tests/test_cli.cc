@@ -2,12 +2,14 @@
 // kind of bad input rejected with a message naming it and a non-zero exit, import.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <utility>
 #include <nlohmann/json.hpp>
 
+#include "spml/signal.h"
 #include "test_util.h"
 
 using spml::test::run;
@@ -137,6 +139,32 @@ TEST(CliImport, CsvRoundTripThroughInfo) {
   EXPECT_NE(bad.output.find("no column 'nothere' (available: time, angle, torque)"), std::string::npos) << bad.output;
   EXPECT_FALSE(std::filesystem::exists(out + ".2"));
   std::filesystem::remove_all(dir);
+}
+
+// --decimate low-passes first unless --no-anti-alias; the dataset says which (provenance).
+TEST(CliImport, DecimationIsRecordedWithItsAntiAliasFilter) {
+  auto dir = spml::test::temp_dir("import-decimate");
+  std::ofstream csv((dir / "d.csv").string());
+  csv << "t,angle,torque\n";
+  for (int i = 0; i < 400; ++i) csv << 0.001 * i << "," << std::sin(0.01 * i) << "," << std::cos(0.01 * i) << "\n";
+  csv.close();
+  for (const std::string extra : {"", " --no-anti-alias"}) {
+    const auto out = (dir / ("d" + std::to_string(extra.size()) + ".h5")).string();
+    auto r = run(spml_bin() + " import " + (dir / "d.csv").string() + " --x q:j=angle --y tau:j=torque --t t --derive --decimate 4" + extra +
+                 " -o " + out);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    const auto j = nlohmann::json::parse(run(spml_bin() + " info --json " + out).output);
+    const std::string rec = j["provenance"]["decimation"];
+    if (extra.empty()) {
+      const auto f = spml::parse_lowpass_record(rec.substr(rec.find("after ") + 6));
+      ASSERT_TRUE(rec.rfind("keep=4 after ", 0) == 0 && f) << rec;
+      EXPECT_NEAR(f->cutoff_hz, 0.8 * 0.5 * 1000 / 4, 1e-6);   // 0.8 of the new Nyquist frequency
+      EXPECT_EQ(f->order, 8);
+    } else {
+      EXPECT_EQ(rec, "keep=4 plain");
+    }
+    EXPECT_EQ(j["splits"][0]["rows"], 100);
+  }
 }
 
 // Real measurements from ../shared (never committed): MATLAB v5 import via matio.

@@ -150,6 +150,14 @@ TEST(CliGuards, ImportAndBenchOptionsThatCannotWork) {
   expect_error(spml("import semi.csv --delimiter ';' --comment '#' --x a --y y --out semi.h5"), 1,
                {"semi.csv:3: column 'a': '1,5' is not a finite number (decimal commas are not read"});
   EXPECT_FALSE(fs::exists(dir() / "semi.h5"));
+  expect_error(spml("import semi.csv --delimiter ';' --comment '#' --x a --y y --no-anti-alias --out semi.h5"), 2,
+               {"--no-anti-alias: applies to --decimate K with K >= 2"});
+  // A record of a few rows (import --decimate 700 of 2000 left 3) once crashed diagnose: an
+  // empty held-out part.
+  const std::string arm = std::string(SPML_SOURCE_DIR) + "/mjcf/planar_arm3.xml";
+  ASSERT_EQ(spml("generate -q --model " + arm + " --duration 0.03 --rate 200 --derive -o tiny.h5").exit_code, 0);
+  expect_error(spml("diagnose -m " + arm + " -d tiny.h5 -o tinyout --no-plots"), 1,
+               {"tiny.h5: split 'train' has 2 rows; diagnose needs at least 10"});
   expect_error(spml("bench --data sl.h5 --out dupset --learners GP --set max_evals=5 --set max_evals=6"), 2,
                {"--set: 'max_evals' is given twice (max_evals=5 and max_evals=6)"});
   EXPECT_FALSE(fs::exists(dir() / "dupset"));

@@ -173,9 +173,9 @@ TEST(Signal, ImportDerivesAccelerationsFromUnevenNoisyPositions) {
   EXPECT_NEAR(s.t[0], 200 * spml::median_step(t), 1e-9);   // 200 edge samples dropped
 }
 
-// Raw central differences of an 18-bit encoder at 1 kHz: the acceleration's noise, about
-// q_step / sqrt(12) * sqrt(6) / dt^2 = 17 rad/s^2 (2.4 x the RMS of a 0.5 Hz, 1 rad sine's), lies
-// near 500 Hz. Keeping every 10th sample alone folds it into the 50 Hz band; the
+// Raw central differences of an 18-bit encoder at 1 kHz: the acceleration's noise (a central
+// difference of a central difference, / 4 dt^2: about 4 rad/s^2, 0.6 of the RMS of a 0.5 Hz,
+// 1 rad sine's acceleration; 0.61 measured) lies near 500 Hz. Keeping every 10th sample alone folds it into the 50 Hz band; the
 // decimation's anti-alias low-pass (40 Hz) keeps the share of a sin^4 spectrum below it,
 // about 1e-5 of the power: under 1 % RMS error.
 TEST(Import, DecimationLowPassesFirstUnlessToldNotTo) {

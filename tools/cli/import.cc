@@ -57,6 +57,8 @@ void add_import(CLI::App& app) {
     if (!order || *order % 2) throw CLI::ValidationError("--filter-order", "'" + a->order + "' is not an even number in [2, 12]");
     if (!drop) throw CLI::ValidationError("--drop-edges", "'" + a->drop + "' is not a whole number >= 0");
     if (!decimate) throw CLI::ValidationError("--decimate", "'" + a->decimate + "' is not a whole number >= 1");
+    if (!a->spec.conditioning.anti_alias && *decimate <= 1)
+      throw CLI::ValidationError("--no-anti-alias", "applies to --decimate K with K >= 2 (there is no decimation to leave unfiltered)");
     c.lowpass_hz = lowpass;
     c.filter_order = static_cast<int>(*order);
     c.drop_edges = static_cast<int>(*drop);

@@ -190,18 +190,23 @@ void Diagnosis::delay_decide(double d, const std::function<Eigen::VectorXd(doubl
   // kMinDelay, and clean simulated logs had it named. Offsets near it are not named either.
   const bool hold = std::fabs(d + 0.5 * h) < kMinDelay;
   const bool evidence = delay_.delta_bic > opt_.bic_threshold && std::fabs(d) > 3 * delay_.stderr_ && std::fabs(d) >= kMinDelay && !hold;
-  // Raw differences (no low-pass recorded): shifting the columns interpolates, and so averages,
-  // their errors, which lowers the residual by itself - spurious offsets of a few ms on clean
-  // RealisticDraws (-3.7 ms, ΔBIC 2700, after an anti-aliased decimation); reported, not named.
-  if (filter_plan_.raw_differences) {
-    delay_.why = "not named: the velocities and accelerations are raw differences of noisy positions, whose errors make the "
-                 "offset unreliable (spurious delays were found on clean data); low-pass them at import (spml import --lowpass)";
-    return;
-  }
   // A delay worth correcting removes a tenth of the held-out residual: on raw differences of
   // coarse encoders (16 bit, 2 % torque noise) the errors in the regressors let a spurious
   // offset gain a few per cent (clean draws of RealisticDraws named `delay` at min_gain).
-  delay_.named = evidence && gains_on_test(test_rss(0), test_rss(d), std::max(opt_.min_gain, kMinDelayGain), rss_floor(test_.b));
+  const bool passes = evidence && gains_on_test(test_rss(0), test_rss(d), std::max(opt_.min_gain, kMinDelayGain), rss_floor(test_.b));
+  // Raw differences (no low-pass below 0.4 of the rate smoothed them): shifting the columns
+  // interpolates, and so averages, their errors, which lowers the residual by itself -
+  // spurious offsets of a few ms on clean RealisticDraws (-3.7 ms, ΔBIC 2700, after an
+  // anti-aliased decimation) and about -h/2 of bias on a real one. Measured and said, not named.
+  if (passes && filter_plan_.raw_differences) {
+    delay_.withheld = true;
+    delay_.why = "not named: the accelerations (and the velocities the import derived) are central differences that no low-pass "
+                 "smoothed, and interpolating their errors lowers the residual by itself (spurious offsets of a few ms on clean data); "
+                 "import with --lowpass (e.g. 5-10 times the excitation band) to have it tested";
+    notes_.push_back("the torques appear to lag the states by " + fmt(d) + " ± " + fmt(delay_.stderr_, 2) + " s, " + delay_.why);
+    return;
+  }
+  delay_.named = passes;
   if (!delay_.named) {
     delay_.why = std::fabs(d) < kMinDelay ? "the offset is below " + fmt(kMinDelay) + " s (half a tick of a held torque command is normal): not named, not corrected"
                  : hold ? "the torques lead the states by half a sample (" + fmt(0.5 * h) + " s), as a torque held over each sample does: "
@@ -228,7 +233,7 @@ void Diagnosis::delay_decide(double d, const std::function<Eigen::VectorXd(doubl
 
 // The `delay` entry of report.json (always), and its cause when named.
 nlohmann::json Diagnosis::delay_report() const {
-  return {{"seconds", delay_.seconds}, {"stderr", delay_.stderr_}, {"delta_bic", delay_.delta_bic}, {"named", delay_.named},
+  return {{"seconds", delay_.seconds}, {"stderr", delay_.stderr_}, {"delta_bic", delay_.delta_bic}, {"named", delay_.named}, {"withheld", delay_.withheld},
           {"range_s", delay_.range}, {"why", delay_.why}};
 }
 

@@ -97,6 +97,7 @@ inline std::string declaration_name(const Candidate& c) { return kDiagnosedPrefi
 struct DelayResult {
   double seconds = 0, stderr_ = std::numeric_limits<double>::infinity(), delta_bic = 0, range = 0;
   bool named = false;
+  bool withheld = false;   // evidence and held-out gain pass, but the data cannot be trusted with it (raw differences)
   std::string why;
   Eigen::VectorXd y0_fit, y0_test;   // the fit and test targets before the correction (baseline)
 };
@@ -242,8 +243,8 @@ class Diagnosis {
                          const std::vector<double>& ub, std::vector<double>& x) const;
   void polish_stateful(const Candidate& c, const Fit& current, const std::vector<double>& lb, const std::vector<double>& ub, int passes,
                        std::vector<double>& x) const;
-  std::vector<std::vector<double>> grid_starts(const Candidate& c, const Fit& current, const std::vector<bool>& level,
-                                               const std::vector<double>& lb, const std::vector<double>& ub, const std::vector<double>& x) const;
+  std::vector<double> grid_start(const Candidate& c, const Fit& current, const std::vector<bool>& level, const std::vector<double>& lb,
+                                 const std::vector<double>& ub, const std::vector<double>& x) const;
   int stateful_rival(int accepted, const std::vector<int>& order, const std::vector<int>& chosen, Fit& next, Eigen::VectorXd& next_test);
   void settle_levels(Candidate& c, const Fit& current, const std::vector<bool>& level, std::vector<double>& x);
   void stateful_errors(Candidate& c, const Fit& current, const std::vector<double>& x);

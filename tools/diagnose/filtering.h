@@ -20,10 +20,11 @@ struct FilterPlan {
   enum class Source { none, recorded, detected } source = Source::none;
   LowpassRecord lowpass;
   bool torques = false;       // filter the torques too (they came unfiltered)
-  // The velocities and accelerations are differences of noisy positions that no low-pass
-  // smoothed (the filter was detected, or the dataset says it derived them and records no
-  // filter: an anti-aliased decimation leaves too little above the band to detect): what
-  // interpolates the columns (the delay search) also averages their errors.
+  // The accelerations are differences of noisy positions that no low-pass smoothed in the
+  // band (the filter was detected; or the dataset says import derived them and records no
+  // filter, or one at or above 0.4 of the rate it ran at - an anti-aliased decimation leaves
+  // too little above the band to detect): what interpolates the columns (the delay search)
+  // also averages their errors.
   bool raw_differences = false;
   std::string description;    // for report.json: what was done and why
 };

@@ -8,6 +8,9 @@
 
 namespace spml::diagnose_detail {
 
+// Rows a fit or test split needs at the least (uniform steps, differences, a hold-out).
+constexpr Eigen::Index kMinRows = 10;
+
 void Diagnosis::load() {
   RegressorOptions ro;
   ro.coulomb_only_where_modelled = true;
@@ -70,17 +73,24 @@ void Diagnosis::choose_splits(const Dataset& ds, const std::string& file, Split&
   const Split& fit = ds.get(opt_.fit_split);
   const std::string where = file + ": ";
   fit_part = fit;
+  auto enough = [&](const Split& s) {
+    if (s.rows() < kMinRows)
+      throw DatasetError(where + "split '" + s.name + "' has " + std::to_string(s.rows()) + " rows; diagnose needs at least " +
+                         std::to_string(kMinRows) + " in the fit and in the test split");
+    return s;
+  };
+  enough(fit);
   if (!opt_.test_split.empty()) {
     if (opt_.test_split == opt_.fit_split)
       throw DatasetError(where + "the test split is the fit split ('" + opt_.fit_split +
                          "'): the gain must be measured on data the fit never saw");
-    test_part = ds.get(opt_.test_split);
+    test_part = enough(ds.get(opt_.test_split));
     test_name_ = opt_.test_split;
     return;
   }
   for (const Split& s : ds.splits)
     if (s.name != opt_.fit_split) {
-      test_part = s;
+      test_part = enough(s);
       test_name_ = s.name;
       return;
     }
@@ -89,6 +99,12 @@ void Diagnosis::choose_splits(const Dataset& ds, const std::string& file, Split&
   const Eigen::Index n = fit.rows(), k = n - static_cast<Eigen::Index>(std::floor(opt_.holdout * static_cast<double>(n)));
   fit_part = fit.slice(0, k, opt_.fit_split);
   test_name_ = opt_.fit_split + "[last " + fmt(100 * opt_.holdout, 3) + "%]";
+  // A hold-out of no rows left an empty test split that crashed the diagnosis (a 3-row file
+  // from import --decimate 700 of 2000 rows).
+  if (k < kMinRows || n - k < kMinRows)
+    throw DatasetError(file + ": split '" + opt_.fit_split + "' has " + std::to_string(n) + " rows: holding out " + fmt(100 * opt_.holdout, 3) +
+                       " % leaves " + std::to_string(k) + " to fit and " + std::to_string(n - k) + " to test; each needs at least " +
+                       std::to_string(kMinRows));
   test_part = fit.slice(k, n, test_name_);
   const std::string note = "the dataset has one split: its last " + fmt(100 * opt_.holdout, 3) + " % of rows (in time order) are held out as the test split";
   if (std::find(notes_.begin(), notes_.end(), note) == notes_.end()) notes_.push_back(note);

@@ -47,6 +47,8 @@ std::string report_summary(const nlohmann::json& r) {
     s << "\n";
   }
   if (r["causes"].empty()) s << "  no cause found: nothing passes the evidence and held-out tests\n";
+  if (r.contains("delay") && r["delay"].value("withheld", false))   // #22: measured, not trusted on these data
+    s << "  delay " << num(1e3 * r["delay"]["seconds"].get<double>()) << " ms measured, not named: raw differences (see report.json delay.why)\n";
   s << "  final: relative error on test " << pct(r["final"]["rel_error_test_all"].get<double>()) << "\n";
   for (const auto& c : r.value("cross", nlohmann::json::array()))
     s << "  cross " << c["data"].get<std::string>() << " '" << c["split"].get<std::string>() << "': " << pct(c["rel_error_given"].get<double>())

@@ -27,7 +27,8 @@ namespace spml::diagnose_detail {
 namespace {
 
 constexpr double kNotIdentifiable = 0.5;   // relative standard error above which a key is reported not identifiable
-constexpr int kPolishEvalsPerKey = 300;    // subplex evaluations per fitted key and pass (polish_stateful)
+constexpr int kPolishEvalsPerKey = 300;    // subplex evaluations per fitted key and pass (polish_stateful) ...
+constexpr double kPolishRows = 8000;       // ... up to this many rows per joint in the fit split
 
 }  // namespace
 
@@ -221,11 +222,13 @@ void Diagnosis::fit_stateful(Candidate& c, const Fit& current) {
   const bool polish = std::isfinite(scanned) && scanned > 0 &&
                       delta_bic(n, current.rss, current.rss - scanned, static_cast<double>(ns) + 1, rss_floor(fit_.b)) > opt_.bic_threshold;
   if (polish) {
-    polish_stateful(c, current, lb, ub, 2, x);
-    double best = stateful_drop(c, current, x);
-    for (std::vector<double>& start : grid_starts(c, current, level, lb, ub, x)) {
-      polish_stateful(c, current, lb, ub, 1, start);
-      if (const double g = stateful_drop(c, current, start); g > best) best = g, x = start;
+    // Two polishes: from the scanned or static start, and from the grid's best point (polishing
+    // all of them twice cost the Panda's 7 joints 215 s of search).
+    std::vector<double> grid = grid_start(c, current, level, lb, ub, x);
+    polish_stateful(c, current, lb, ub, 1, x);
+    if (!grid.empty()) {
+      polish_stateful(c, current, lb, ub, 1, grid);
+      if (stateful_drop(c, current, grid) > stateful_drop(c, current, x)) x = std::move(grid);
     }
   }
   stateful_errors(c, current, x);
@@ -234,22 +237,22 @@ void Diagnosis::fit_stateful(Candidate& c, const Fit& current) {
   settle_levels(c, current, level, x);
 }
 
-// The three best points of a coarse grid over the keys that are not levels (5 per key, cell
-// centres of their log ranges; the levels held at x's), as further starts of the polish: the
-// two starts of fit_stateful both led one LuGre draw to a Stribeck speed of 1.29 rad/s (truth
-// 0.09) with fc and fs 23 and 34 % low, a basin whose held-out error (0.389 %) the true
-// parameters beat (0.363 %).
-std::vector<std::vector<double>> Diagnosis::grid_starts(const Candidate& c, const Fit& current, const std::vector<bool>& level,
-                                                        const std::vector<double>& lb, const std::vector<double>& ub,
-                                                        const std::vector<double>& x) const {
-  constexpr int kPerKey = 5, kStarts = 3;
+// The best point of a coarse grid over the keys that are not levels (5 per key, cell centres
+// of their log ranges; the levels held at x's; empty when there are none or too many), a
+// further start of the polish: from the scanned and the static starts alone two LuGre draws
+// (DiagnoseBeyond.LuGreOfSmallBreakAwayIsNotCoulomb) ended where their levels were not
+// determined, and `coulomb` was named.
+std::vector<double> Diagnosis::grid_start(const Candidate& c, const Fit& current, const std::vector<bool>& level,
+                                          const std::vector<double>& lb, const std::vector<double>& ub, const std::vector<double>& x) const {
+  constexpr int kPerKey = 5;
   std::vector<size_t> keys;
   for (size_t k = 0; k < x.size(); ++k)
     if (!level[k]) keys.push_back(k);
   size_t total = 1;
   for (size_t i = 0; i < keys.size(); ++i) total *= kPerKey;
   if (keys.empty() || total > 625) return {};
-  std::vector<std::pair<double, std::vector<double>>> scored;
+  std::vector<double> best;
+  double best_drop = -std::numeric_limits<double>::infinity();
   for (size_t idx = 0; idx < total; ++idx) {
     std::vector<double> p = x;
     size_t rest = idx;
@@ -257,14 +260,9 @@ std::vector<std::vector<double>> Diagnosis::grid_starts(const Candidate& c, cons
       p[k] = lb[k] + (ub[k] - lb[k]) * (static_cast<double>(rest % kPerKey) + 0.5) / kPerKey;
       rest /= kPerKey;
     }
-    if (const double g = stateful_drop(c, current, p); std::isfinite(g)) scored.emplace_back(g, std::move(p));
+    if (const double g = stateful_drop(c, current, p); g > best_drop) best_drop = g, best = std::move(p);
   }
-  const auto n = std::min<size_t>(kStarts, scored.size());
-  std::partial_sort(scored.begin(), scored.begin() + static_cast<std::ptrdiff_t>(n), scored.end(),
-                    [](const auto& a, const auto& b) { return a.first > b.first; });
-  std::vector<std::vector<double>> out;
-  for (size_t i = 0; i < n; ++i) out.push_back(std::move(scored[i].second));
-  return out;
+  return best;
 }
 
 // Subplex on the drop, `passes` times: restarted from its own end point it leaves a valley it
@@ -286,8 +284,10 @@ void Diagnosis::polish_stateful(const Candidate& c, const Fit& current, const st
   }, &ctx);
   // 80 evaluations per key stopped LuGre's first pass short of the optimum: fs 1.31 where it
   // lies at 1.07 (truth 1.04), 26 % apart for a change of the data's anti-alias filter far above
-  // their band; 300 per key reach it (1200 of them on a 6-key LuGre) from both datasets.
-  local.set_maxeval(kPolishEvalsPerKey * static_cast<int>(x.size()));
+  // their band; 300 per key (1800 per pass on LuGre's 6 keys) reach it from both datasets.
+  // Scaled down beyond kPolishRows rows (a longer log's objective is smoother, each evaluation dearer).
+  const double rows = static_cast<double>(fit_.N);
+  local.set_maxeval(static_cast<int>(kPolishEvalsPerKey * std::min(1.0, kPolishRows / rows)) * static_cast<int>(x.size()));
   local.set_xtol_abs(1e-4);
   for (int pass = 0; pass < passes; ++pass) {
     double value = 0;
