@@ -335,6 +335,22 @@ TEST(DiagnoseBeyond, DelayIsFoundBesideStaticFriction) {
   }
 }
 
+// LuGre draw s of make_draw's family: `stick_slip` named on its joint, fc within 20 % (and fs,
+// when fs_too).
+void expect_stick_slip(const std::filesystem::path& dir, int s, bool fs_too) {
+  const Draw d = make_draw(dir, "lugre", s, 0, Measurement{});
+  const auto r = run_draw(dir, d, s);
+  const auto causes = named(r);
+  std::cout << d.what << " on j" << d.joint << ": named " << joined(causes) << "\n";
+  ASSERT_NE(std::find(causes.begin(), causes.end(), "stick_slip@j" + std::to_string(d.joint)), causes.end()) << joined(causes);
+  for (const auto& cause : r["causes"])
+    if (cause["effect"] == "stick_slip" && !cause.contains("superseded_by")) {
+      std::cout << "  " << cause["params"].dump() << "\n";
+      EXPECT_NEAR(cause["params"]["fc"].get<double>(), d.fc, 0.2 * d.fc);
+      if (fs_too) EXPECT_NEAR(cause["params"]["fs"].get<double>(), d.fs, 0.2 * d.fs);
+    }
+}
+
 // LuGre on a random joint of a random spatial 3-joint chain, random levels (fc 6-15 % of the
 // joint's RMS torque, fs 1.2-2 fc, vs 0.03-0.23 rad/s, pre-sliding 1-3 mrad), positions only,
 // 1 % torque noise, 18-bit encoders, derivatives through the usual 10 Hz low-pass: `stick_slip`
@@ -342,38 +358,16 @@ TEST(DiagnoseBeyond, DelayIsFoundBesideStaticFriction) {
 // started from the static fits and was compared with them held out.
 TEST(DiagnoseBeyond, LuGreIsNamedOnRealisticDataAgainstTheStaticCandidates) {
   const auto dir = test::temp_dir("lugre10");
-  for (int s : {3, 0}) {
-    const Draw d = make_draw(dir, "lugre", s, 0, Measurement{});
-    const auto r = run_draw(dir, d, s);
-    const auto causes = named(r);
-    std::cout << d.what << " on j" << d.joint << ": named " << joined(causes) << "\n";
-    const std::string want = "stick_slip@j" + std::to_string(d.joint);
-    ASSERT_NE(std::find(causes.begin(), causes.end(), want), causes.end()) << joined(causes);
-    for (const auto& cause : r["causes"])
-      if (cause["effect"] == "stick_slip" && !cause.contains("superseded_by")) {
-        std::cout << "  " << cause["params"].dump() << "\n";
-        EXPECT_NEAR(cause["params"]["fc"].get<double>(), d.fc, 0.2 * d.fc);
-        EXPECT_NEAR(cause["params"]["fs"].get<double>(), d.fs, 0.2 * d.fs);
-      }
-  }
+  for (int s : {3, 0}) expect_stick_slip(dir, s, true);
 }
 
 // Draws 2 and 6 of the same family were named `coulomb` until the stateful fit polished from a
-// coarse grid over its shape keys too (grid_starts): now `stick_slip` on the right joint with
+// coarse grid over its shape keys too (grid_start): now `stick_slip` on the right joint with
 // fc within 20 %. Their fs stays 42 and 27 % low, with vs at 0.5 and 1.3 rad/s (truth 0.04,
 // 0.08): through the 10 Hz low-pass that fits the fit split better than the true curve.
 TEST(DiagnoseBeyond, LuGreOfSmallBreakAwayIsNotCoulomb) {
   const auto dir = test::temp_dir("lugre26");
-  for (int s : {2, 6}) {
-    const Draw d = make_draw(dir, "lugre", s, 0, Measurement{});
-    const auto r = run_draw(dir, d, s);
-    const auto causes = named(r);
-    std::cout << d.what << " on j" << d.joint << ": named " << joined(causes) << "\n";
-    ASSERT_NE(std::find(causes.begin(), causes.end(), "stick_slip@j" + std::to_string(d.joint)), causes.end()) << joined(causes);
-    for (const auto& cause : r["causes"])
-      if (cause["effect"] == "stick_slip" && !cause.contains("superseded_by"))
-        EXPECT_NEAR(cause["params"]["fc"].get<double>(), d.fc, 0.2 * d.fc) << cause["params"].dump();
-  }
+  for (int s : {2, 6}) expect_stick_slip(dir, s, false);
 }
 
 // A torque held over each sample leads the states by half a sample: 2.5 ms at 200 Hz, above
