@@ -156,10 +156,10 @@ TEST(CliImport, DecimationIsRecordedWithItsAntiAliasFilter) {
     const auto j = nlohmann::json::parse(run(spml_bin() + " info --json " + out).output);
     const std::string rec = j["provenance"]["decimation"];
     if (extra.empty()) {
-      const auto f = spml::parse_lowpass_record(rec.substr(rec.find("after ") + 6));
-      ASSERT_TRUE(rec.rfind("keep=4 after ", 0) == 0 && f) << rec;
-      EXPECT_NEAR(f->cutoff_hz, 0.8 * 0.5 * 1000 / 4, 1e-6);   // 0.8 of the new Nyquist frequency
-      EXPECT_EQ(f->order, 8);
+      const auto d = spml::parse_decimation_record(rec);
+      ASSERT_TRUE(d && d->keep == 4 && d->anti_alias) << rec;
+      EXPECT_NEAR(d->anti_alias->cutoff_hz, 0.8 * 0.5 * 1000 / 4, 1e-6);   // 0.8 of the new Nyquist frequency
+      EXPECT_EQ(d->anti_alias->order, 8);
     } else {
       EXPECT_EQ(rec, "keep=4 plain");
     }

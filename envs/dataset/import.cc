@@ -548,9 +548,11 @@ Dataset table_to_dataset(const Table& table, const ImportSpec& spec) {
   if (spec.conditioning.lowpass_hz > 0)
     ds.provenance["filter"] = lowpass_record_text({spec.conditioning.filter_order, spec.conditioning.lowpass_hz});
   if (spec.conditioning.derive) ds.provenance["derivatives"] = "central-difference";
-  if (spec.conditioning.decimate > 1)
-    ds.provenance["decimation"] = "keep=" + std::to_string(spec.conditioning.decimate) +
-                                  (anti_alias_hz > 0 ? " after " + lowpass_record_text({kAntiAliasOrder, anti_alias_hz}) : " plain");
+  if (spec.conditioning.decimate > 1) {
+    DecimationRecord d{spec.conditioning.decimate, std::nullopt};
+    if (anti_alias_hz > 0) d.anti_alias = LowpassRecord{kAntiAliasOrder, anti_alias_hz};
+    ds.provenance["decimation"] = decimation_record_text(d);
+  }
   validate(ds, table.source);
   return ds;
 }

@@ -126,4 +126,25 @@ std::optional<LowpassRecord> parse_lowpass_record(const std::string& text) {
   return f;
 }
 
+std::string decimation_record_text(const DecimationRecord& d) {
+  return "keep=" + std::to_string(d.keep) + (d.anti_alias ? " after " + lowpass_record_text(*d.anti_alias) : std::string(" plain"));
+}
+
+std::optional<DecimationRecord> parse_decimation_record(const std::string& text) {
+  const auto space = text.find(' ');
+  if (text.rfind("keep=", 0) != 0 || space == std::string::npos) return std::nullopt;
+  DecimationRecord d;
+  try {
+    size_t used = 0;
+    d.keep = std::stoi(text.substr(5, space - 5), &used);
+    if (used != space - 5 || d.keep < 1) return std::nullopt;
+  } catch (const std::exception&) {
+    return std::nullopt;
+  }
+  const std::string rest = text.substr(space + 1);
+  if (rest == "plain") return d;
+  if (rest.rfind("after ", 0) != 0 || !(d.anti_alias = parse_lowpass_record(rest.substr(6)))) return std::nullopt;
+  return d;
+}
+
 }  // namespace spml

@@ -241,7 +241,7 @@ class Diagnosis {
   std::map<std::string, double> static_start(const Candidate& c, const Fit& current) const;
   double scan_shape_keys(const Candidate& c, const Fit& current, const std::vector<bool>& level, const std::vector<double>& lb,
                          const std::vector<double>& ub, std::vector<double>& x) const;
-  void polish_stateful(const Candidate& c, const Fit& current, const std::vector<double>& lb, const std::vector<double>& ub, int passes,
+  void polish_stateful(const Candidate& c, const Fit& current, const std::vector<double>& lb, const std::vector<double>& ub,
                        std::vector<double>& x) const;
   std::vector<double> grid_start(const Candidate& c, const Fit& current, const std::vector<bool>& level, const std::vector<double>& lb,
                                  const std::vector<double>& ub, const std::vector<double>& x) const;

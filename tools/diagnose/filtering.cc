@@ -4,8 +4,6 @@
 
 #include <cmath>
 #include <sstream>
-#include <stdexcept>
-#include <algorithm>
 
 namespace spml::diagnose_detail {
 namespace {
@@ -36,15 +34,11 @@ double excitation_band(const std::vector<Eigen::VectorXd>& q, double rate) {
   return 0;
 }
 
-// K of import's "keep=K ..." decimation record (1: none, or not understood).
+// K of import's decimation record (1: none, or not understood).
 double decimated_by(const Dataset& ds) {
   const auto it = ds.provenance.find("decimation");
-  if (it == ds.provenance.end() || it->second.rfind("keep=", 0) != 0) return 1;
-  try {
-    return std::max(1.0, std::stod(it->second.substr(5)));
-  } catch (const std::exception&) {
-    return 1;
-  }
+  const auto d = it == ds.provenance.end() ? std::nullopt : parse_decimation_record(it->second);
+  return d ? d->keep : 1;
 }
 
 }  // namespace

@@ -27,7 +27,7 @@ namespace spml::diagnose_detail {
 namespace {
 
 constexpr double kNotIdentifiable = 0.5;   // relative standard error above which a key is reported not identifiable
-constexpr int kPolishEvalsPerKey = 300;    // subplex evaluations per fitted key and pass (polish_stateful) ...
+constexpr int kPolishEvalsPerKey = 300;    // subplex evaluations per fitted key (polish_stateful) ...
 constexpr double kPolishRows = 8000;       // ... up to this many rows per joint in the fit split
 
 }  // namespace
@@ -230,9 +230,9 @@ void Diagnosis::fit_stateful(Candidate& c, const Fit& current) {
     // Two polishes: from the scanned or static start, and from the grid's best point (polishing
     // all of them twice cost the Panda's 7 joints 215 s of search).
     std::vector<double> grid = grid_start(c, current, level, lb, ub, x);
-    polish_stateful(c, current, lb, ub, 1, x);
+    polish_stateful(c, current, lb, ub, x);
     if (!grid.empty()) {
-      polish_stateful(c, current, lb, ub, 1, grid);
+      polish_stateful(c, current, lb, ub, grid);
       if (stateful_drop(c, current, grid) > stateful_drop(c, current, x)) x = std::move(grid);
     }
   }
@@ -270,10 +270,10 @@ std::vector<double> Diagnosis::grid_start(const Candidate& c, const Fit& current
   return best;
 }
 
-// Subplex on the drop, `passes` times: restarted from its own end point it leaves a valley it
-// had stalled in.
+// Subplex on the drop, from x, one pass (restarts from its own end point, which 80 evaluations
+// per key had needed, left the LuGre draws' optimum unchanged at 400 per key).
 void Diagnosis::polish_stateful(const Candidate& c, const Fit& current, const std::vector<double>& lb, const std::vector<double>& ub,
-                                int passes, std::vector<double>& x) const {
+                                std::vector<double>& x) const {
   struct Ctx {
     const Diagnosis* self;
     const Candidate* c;
@@ -294,13 +294,11 @@ void Diagnosis::polish_stateful(const Candidate& c, const Fit& current, const st
   const double rows = static_cast<double>(fit_.N);
   local.set_maxeval(static_cast<int>(kPolishEvalsPerKey * std::min(1.0, kPolishRows / rows)) * static_cast<int>(x.size()));
   local.set_xtol_abs(1e-4);
-  for (int pass = 0; pass < passes; ++pass) {
-    double value = 0;
-    try {
-      local.optimize(x, value);
-    } catch (const std::exception&) {
-      // a roundoff-limited stop: x holds the best point found
-    }
+  double value = 0;
+  try {
+    local.optimize(x, value);
+  } catch (const std::exception&) {
+    // a roundoff-limited stop: x holds the best point found
   }
 }
 

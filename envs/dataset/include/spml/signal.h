@@ -44,4 +44,14 @@ std::string lowpass_record_text(const LowpassRecord& f);
 // nullopt when `text` is not such a record (a reader ignores what it does not know).
 std::optional<LowpassRecord> parse_lowpass_record(const std::string& text);
 
+// A decimation, as recorded in the root attribute `decimation`: every `keep`-th row kept,
+// after an anti-alias low-pass ("keep=5 after butterworth order=8 cutoff=80 zero-phase") or
+// without one ("keep=5 plain").
+struct DecimationRecord {
+  int keep = 1;
+  std::optional<LowpassRecord> anti_alias;
+};
+std::string decimation_record_text(const DecimationRecord& d);
+std::optional<DecimationRecord> parse_decimation_record(const std::string& text);
+
 }  // namespace spml
