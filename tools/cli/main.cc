@@ -1,4 +1,5 @@
 #include <cstdio>
+#include <malloc.h>
 #include <exception>
 #include <filesystem>
 #include <iostream>
@@ -29,6 +30,11 @@ void mujoco_warning_to_stderr(const char* msg) { std::cerr << "spml: MuJoCo warn
 
 int main(int argc, char** argv) {
   mju_user_warning = mujoco_warning_to_stderr;
+  // Designs of tens of MB are made and dropped hundreds of times (diagnose's searches on 10^5
+  // rows): above glibc's mmap threshold each one is fresh pages the kernel must fault in and
+  // zero (15 of 90 s on the undecimated Panda). Kept in the heap they are reused.
+  mallopt(M_MMAP_THRESHOLD, 1 << 30);
+  mallopt(M_TRIM_THRESHOLD, 1 << 30);
   CLI::App app{"spml: semi-parametric model learning for robot dynamics"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "spml " SPML_VERSION " (dataset format spml/1, learner ABI " +

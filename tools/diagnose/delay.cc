@@ -30,41 +30,42 @@ constexpr double kMaxDelay = 0.05;
 constexpr double kMinDelay = 1e-3;
 constexpr double kMinDelayGain = 0.1;   // the held-out residual sum of squares must fall by this much
 
-// x sampled on a uniform grid (step h), evaluated at i + d/h for every row i: cubic Hermite
-// with central-difference slopes, held at the ends.
-Eigen::VectorXd shifted(const Eigen::Ref<const Eigen::VectorXd>& x, double d, double h) {
-  const Eigen::Index n = x.size();
-  Eigen::VectorXd out(n);
-  auto at = [&](Eigen::Index k) { return x[std::clamp<Eigen::Index>(k, 0, n - 1)]; };
-  auto slope = [&](Eigen::Index k) { return 0.5 * (at(k + 1) - at(k - 1)); };
+// The columns of X sampled on a uniform grid (step h), evaluated at i + d/h for every row i:
+// cubic Hermite with central-difference slopes, held at the ends. The rows whose four
+// neighbours all lie inside go as whole-column sums (the delay search shifts 10^5-row blocks
+// a hundred times), the few at the ends one by one with clamped neighbours.
+Eigen::MatrixXd shifted_columns(const Eigen::MatrixXd& X, double d, double h) {
+  const Eigen::Index n = X.rows();
+  Eigen::MatrixXd out(n, X.cols());
   const double s = d / h;
   const double fl = std::floor(s);
   const double u = s - fl;
   const auto k0 = static_cast<Eigen::Index>(fl);
   const double h00 = (1 + 2 * u) * (1 - u) * (1 - u), h10 = u * (1 - u) * (1 - u), h01 = u * u * (3 - 2 * u), h11 = u * u * (u - 1);
-  for (Eigen::Index i = 0; i < n; ++i) {
-    const Eigen::Index k = i + k0;
-    if (k < 0 || k + 1 > n - 1) {
-      out[i] = at(k + (u >= 0.5 ? 1 : 0));
-      continue;
-    }
-    out[i] = h00 * at(k) + h10 * slope(k) + h01 * at(k + 1) + h11 * slope(k + 1);
+  // Rows i with 0 <= i + k0 - 1 and i + k0 + 2 <= n - 1; the others are the ends.
+  const Eigen::Index first = std::clamp<Eigen::Index>(1 - k0, 0, n), last = std::clamp<Eigen::Index>(n - 3 - k0, first - 1, n - 1);
+  if (last >= first) {
+    const Eigen::Index len = last - first + 1, k = first + k0;
+    out.middleRows(first, len) = h00 * X.middleRows(k, len) + h10 * (0.5 * (X.middleRows(k + 1, len) - X.middleRows(k - 1, len))) +
+                                 h01 * X.middleRows(k + 1, len) + h11 * (0.5 * (X.middleRows(k + 2, len) - X.middleRows(k, len)));
   }
-  return out;
-}
-
-// Every torque column of a split resampled at t + d.
-Eigen::MatrixXd shifted_columns(const Eigen::MatrixXd& Y, double d, double h) {
-  Eigen::MatrixXd out(Y.rows(), Y.cols());
-  for (Eigen::Index c = 0; c < Y.cols(); ++c) out.col(c) = shifted(Y.col(c), d, h);
+  for (Eigen::Index c = 0; c < X.cols(); ++c) {
+    auto at = [&](Eigen::Index k) { return X(std::clamp<Eigen::Index>(k, 0, n - 1), c); };
+    auto slope = [&](Eigen::Index k) { return 0.5 * (at(k + 1) - at(k - 1)); };
+    auto end_row = [&](Eigen::Index i) {
+      const Eigen::Index k = i + k0;
+      out(i, c) = k < 0 || k + 1 > n - 1 ? at(k + (u >= 0.5 ? 1 : 0)) : h00 * at(k) + h10 * slope(k) + h01 * at(k + 1) + h11 * slope(k + 1);
+    };
+    for (Eigen::Index i = 0; i < (last >= first ? first : n); ++i) end_row(i);
+    for (Eigen::Index i = std::max(last + 1, first); last >= first && i < n; ++i) end_row(i);
+  }
   return out;
 }
 
 // A block's columns evaluated at t - d (each output's rows shifted alike).
 BlockColumns shifted_block(const BlockColumns& B, double d, double h) {
   BlockColumns out = B;
-  for (auto& part : out.parts)
-    for (Eigen::Index c = 0; c < part.cols(); ++c) part.col(c) = shifted(Eigen::VectorXd(part.col(c)), -d, h);
+  for (auto& part : out.parts) part = shifted_columns(part, -d, h);
   return out;
 }
 
@@ -134,7 +135,10 @@ void Diagnosis::estimate_delay() {
     const BlockColumns base = shifted_block(fit_.base, d, h), nuis = shifted_block(nuisance, d, h);
     return fit_blocks({&base, &nuis}, target, false).residual;
   };
-  auto rss = [&](double d) { return projected(d).squaredNorm(); };
+  auto rss = [&](double d) {
+    const BlockColumns base = shifted_block(fit_.base, d, h), nuis = shifted_block(nuisance, d, h);
+    return rss_of({&base, &nuis}, target);
+  };
   const double step = std::max(h / 4, 2 * delay_.range / 100);
   double best = 0, best_rss = rss(0);
   for (double d = -delay_.range; d <= delay_.range + 1e-12; d += step)

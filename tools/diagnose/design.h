@@ -3,6 +3,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -23,24 +24,37 @@ struct BlockColumns {
 // A least-squares fit of target y on the concatenated blocks, with columns scaled to unit norm
 // and a rank-revealing QR; columns the data leave undetermined get 0 (for the base block:
 // the prior) and an infinite standard error.
+struct Factors;
 struct Fit {
   Eigen::VectorXd coef, stderr_;
   std::vector<bool> determined;
   int rank = 0;
   double rss = 0;
   Eigen::VectorXd residual;   // y - F coef on the fit rows
-  Eigen::MatrixXd Q;          // orthonormal basis of the determined columns (fit rows)
+  // The orthonormal basis of the determined columns on the fit rows (rows x rank), formed on
+  // first use from the factorization the fit keeps (want_basis): most fits are trials that
+  // never need it, and forming it costs as much as the factorization.
+  const Eigen::MatrixXd& Q() const;
+  std::shared_ptr<const Factors> factors;
+  mutable std::shared_ptr<const Eigen::MatrixXd> basis;
 };
 // hac_rows_per_output > 0: standard errors robust to autocorrelation within each output's
 // rows (statistics.h), else the ordinary ones (white residuals).
-Fit fit_blocks(const std::vector<const BlockColumns*>& blocks, const Eigen::VectorXd& y, bool want_q, Eigen::Index hac_rows_per_output = 0);
+Fit fit_blocks(const std::vector<const BlockColumns*>& blocks, const Eigen::VectorXd& y, bool want_basis, Eigen::Index hac_rows_per_output = 0);
+
+// The residual sum of squares of y on the blocks' columns, and nothing else: the normal
+// equations (one product over the rows, where fit_blocks' QR sweeps them column by column),
+// the residual formed from the coefficients and refined once, so that their rounding enters
+// it only to second order. For searches that evaluate the minimum many times (estimate_delay:
+// a hundred designs of 10^5 rows); what is reported comes from fit_blocks.
+double rss_of(const std::vector<const BlockColumns*>& blocks, const Eigen::VectorXd& y);
 
 // The instrumental-variable fit (IDIM-IV, spml/envs/instruments.h) of y on the blocks, with
 // instruments `inst` laid out like them (the same blocks on the model's simulated states):
 // coef = (Z^T F)^-1 Z^T y over the columns least squares determines (the others as in
 // fit_blocks), standard errors the sandwich (Z^T F)^-1 S (F^T Z)^-1, S the long-run
 // covariance of the rows z_i r_i (hac_rows_per_output > 0) or sigma^2 Z^T Z. The residual is
-// y - F coef; no basis Q.
+// y - F coef; no basis.
 Fit iv_fit_blocks(const std::vector<const BlockColumns*>& blocks, const std::vector<const BlockColumns*>& inst, const Eigen::VectorXd& y,
                   Eigen::Index hac_rows_per_output);
 

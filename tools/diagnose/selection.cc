@@ -51,7 +51,7 @@ void Diagnosis::score_candidates(const Fit& current, const std::vector<int>& cho
       else if (!c.stateful && (!c.searched || (!c.shape.empty() && research.count(c.joint))))
         search_shape(c, current);
       else
-        c.gain = gain_of(c.fit_cols, current.Q, current.residual);
+        c.gain = gain_of(c.fit_cols, current.Q(), current.residual);
     } catch (const PluginError& e) {
       // One bad plugin (non-finite regressor values) must not stop the diagnosis.
       c.skipped = true;

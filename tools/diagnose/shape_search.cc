@@ -154,7 +154,7 @@ double Diagnosis::search_shape(Candidate& c, const Fit& current) {
     try {
       PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, shape), where);
       BlockColumns cols = columns(inst, fit_);
-      Gain g = gain_of(cols, current.Q, current.residual);
+      Gain g = gain_of(cols, current.Q(), current.residual);
       if (keep) *keep = std::move(cols);
       // A shape where the fit leaves the effect's form (fs < fc) is no candidate shape: the
       // search looks for the best one inside it.
@@ -171,7 +171,7 @@ double Diagnosis::search_shape(Candidate& c, const Fit& current) {
       c.fit_cols = columns(inst, fit_);
       c.searched = true;
     }
-    c.gain = gain_of(c.fit_cols, current.Q, current.residual);
+    c.gain = gain_of(c.fit_cols, current.Q(), current.residual);
     return c.gain.rss_drop;
   }
   ShapeSearch s{evaluate, c, ns == 1 ? 40 : ns == 2 ? 16 : 6, {}, -1};

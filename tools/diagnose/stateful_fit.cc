@@ -111,11 +111,11 @@ double Diagnosis::stateful_drop(const Candidate& c, const Fit& current, const st
     const Eigen::VectorXd F = cols.dense().col(0);
     // Q^T F over the outputs the force acts on (its joint's): over all of them it was most of
     // the undecimated Panda's search (14 560 rows x 7 outputs per evaluation).
-    Eigen::VectorXd QF = Eigen::VectorXd::Zero(current.Q.cols());
+    Eigen::VectorXd QF = Eigen::VectorXd::Zero(current.Q().cols());
     for (Eigen::Index o = 0; o * fit_.N < F.size(); ++o)
       if (const auto seg = F.segment(o * fit_.N, fit_.N); seg.cwiseAbs().maxCoeff() > 0)
-        QF.noalias() += current.Q.middleRows(o * fit_.N, fit_.N).transpose() * seg;
-    if (force) *force = F - current.Q * QF;   // the projected force
+        QF.noalias() += current.Q().middleRows(o * fit_.N, fit_.N).transpose() * seg;
+    if (force) *force = F - current.Q() * QF;   // the projected force
     return 2 * current.residual.dot(F) - (F.squaredNorm() - QF.squaredNorm());
   } catch (const std::exception&) {
     return -std::numeric_limits<double>::infinity();
@@ -137,7 +137,7 @@ std::map<std::string, double> Diagnosis::static_start(const Candidate& c, const 
     try {
       PluginInstance inst(*s.plugin, reg_->model(), {s.joint}, config_of(s, s.shape_values), "diagnose");
       const Eigen::MatrixXd C = s.fit_cols.dense();
-      const Eigen::MatrixXd Cp = C - current.Q * (current.Q.transpose() * C);
+      const Eigen::MatrixXd Cp = C - current.Q() * (current.Q().transpose() * C);
       const Eigen::VectorXd a = Cp.completeOrthogonalDecomposition().solve(current.residual);
       const auto names = inst.param_names();
       for (size_t k = 0; k < names.size() && k < static_cast<size_t>(a.size()); ++k)
@@ -349,7 +349,7 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
   }
   PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
   c.fit_cols = simulated_columns(inst, fit_);
-  c.gain = gain_of(c.fit_cols, current.Q, current.residual);
+  c.gain = gain_of(c.fit_cols, current.Q(), current.residual);
   c.searched = true;
 }
 

@@ -45,7 +45,7 @@ WrittenParameters Diagnosis::consistent_parameters() const {
       at += c.cols;
     }
     const BlockColumns zb = BlockColumns::from_dense(Z, fit_.N, fit_.base.outputs);
-    const Eigen::MatrixXd Q = fit_blocks({&zb}, Eigen::VectorXd::Zero(Z.rows()), true).Q;   // the span Z determines
+    const Eigen::MatrixXd Q = fit_blocks({&zb}, Eigen::VectorXd::Zero(Z.rows()), true).Q();   // the span Z determines
     const Eigen::MatrixXd Wp = Q * (Q.transpose() * W), Ep = Q * (Q.transpose() * E);
     w.id = fit_consistent(*reg_, Wp, fit_.b, o, Ep);
     w.two_stage = true;
