@@ -2,6 +2,7 @@
 // code, or the right output.
 #include <gtest/gtest.h>
 
+#include <Eigen/Dense>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -10,6 +11,7 @@
 
 #include "diagnose_draws.h"
 #include "diagnosis.h"
+#include "statistics.h"
 #include "spml/envs/mjcf_edit.h"
 #include "spml/diagnose.h"
 #include "spml/envs/mujoco_model.h"
@@ -745,6 +747,55 @@ TEST(DiagnoseCases, ReportUnitsFollowTheJointType) {
   EXPECT_NE(row("j0").find(" N·m |"), std::string::npos) << md;
   EXPECT_NE(row("j1").find(" N |"), std::string::npos) << md;
   EXPECT_EQ(row("j1").find("N·m"), std::string::npos) << md;
+}
+
+// fit_blocks factors a long design in row chunks (diagnose_detail::Factors): the same fit as one
+// column-pivoted QR of the whole design, and rss_of the same minimum by the normal equations.
+// 3 outputs x 20 000 rows (two chunks), a base block over every output with one column an exact
+// combination of two others, and a one-output block as a cause.
+TEST(DiagnoseDesign, ChunkedFactorizationIsOnePivotedQr) {
+  using namespace diagnose_detail;
+  const Eigen::Index N = 20000;
+  const int O = 3;
+  std::mt19937_64 rng(3);
+  std::normal_distribution<double> g;
+  Eigen::MatrixXd B(N * O, 6), C = Eigen::MatrixXd::Zero(N * O, 2);
+  for (Eigen::Index i = 0; i < B.rows(); ++i)
+    for (Eigen::Index k = 0; k < 5; ++k) B(i, k) = g(rng) * (k + 1) + (k == 0 ? 3.0 : 0.0);
+  B.col(5) = 2 * B.col(1) - 0.5 * B.col(3);   // not determined
+  for (Eigen::Index i = N; i < 2 * N; ++i) C(i, 0) = std::sin(1e-3 * static_cast<double>(i)), C(i, 1) = g(rng);
+  Eigen::VectorXd y = B.leftCols(5) * Eigen::VectorXd::LinSpaced(5, 1, 2) + C.col(0) * 0.7;
+  for (Eigen::Index i = 0; i < y.size(); ++i) y[i] += 0.1 * g(rng) + (i > 0 ? 0.05 * y[i - 1] : 0.0);   // some autocorrelation
+  const BlockColumns base = BlockColumns::from_dense(B, N, O), cause = BlockColumns::from_dense(C, N, O);
+  const Fit fit = fit_blocks({&base, &cause}, y, true, N);
+
+  Eigen::MatrixXd F(N * O, 8), independent(N * O, 7);
+  F << B, C;
+  independent << B.leftCols(5), C;   // the same span
+  const Eigen::VectorXd reference = y - independent * independent.colPivHouseholderQr().solve(y);
+  EXPECT_EQ(fit.rank, 7);
+  EXPECT_NEAR(fit.rss, reference.squaredNorm(), 1e-10 * reference.squaredNorm());
+  EXPECT_LT((fit.residual - reference).norm(), 1e-8 * reference.norm());
+  EXPECT_LT((F * fit.coef - (y - reference)).norm(), 1e-8 * y.norm());   // the same prediction
+  EXPECT_NEAR(rss_of({&base, &cause}, y), fit.rss, 1e-9 * fit.rss);
+  // The basis: orthonormal, orthogonal to the residual, spanning the prediction.
+  const Eigen::MatrixXd& Q = fit.Q();
+  ASSERT_EQ(Q.cols(), 7);
+  EXPECT_LT((Q.transpose() * Q - Eigen::MatrixXd::Identity(7, 7)).cwiseAbs().maxCoeff(), 1e-10);
+  EXPECT_LT((Q.transpose() * fit.residual).norm(), 1e-8 * y.norm());
+  // Autocorrelation-robust errors: the sandwich (F1'F1)^-1 S (F1'F1)^-1 over the determined
+  // columns, S the long-run covariance of the rows f_i r_i, times n / (n - rank).
+  std::vector<Eigen::Index> det;
+  for (Eigen::Index k = 0; k < 8; ++k)
+    if (fit.determined[static_cast<size_t>(k)]) det.push_back(k);
+  ASSERT_EQ(det.size(), 7u);
+  Eigen::MatrixXd F1(F.rows(), 7);
+  for (size_t k = 0; k < det.size(); ++k) F1.col(static_cast<Eigen::Index>(k)) = F.col(det[k]);
+  const Eigen::MatrixXd A = (F1.transpose() * F1).inverse();
+  const Eigen::MatrixXd S = long_run_covariance(F1.array().colwise() * fit.residual.array(), fit.residual, N);
+  const Eigen::MatrixXd V = A * S * A * (static_cast<double>(y.size()) / static_cast<double>(y.size() - 7));
+  for (size_t k = 0; k < det.size(); ++k)
+    EXPECT_NEAR(fit.stderr_[det[k]], std::sqrt(V(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(k))), 1e-6 * fit.stderr_[det[k]]) << k;
 }
 
 }  // namespace

@@ -134,7 +134,7 @@ BlockColumns Diagnosis::columns(const PluginInstance& inst, const SplitData& s, 
   if (!inst.plugin().regressor) return simulated_columns(inst, s);   // #22: a stateful plugin (simulated, always filtered)
   const mjModel* m = reg_->model();
   const int np = inst.nparam(), O = static_cast<int>(s.split.Y.cols());
-  Eigen::MatrixXd C = Eigen::MatrixXd::Zero(s.N * O, np);
+  BlockBuilder C(s.N, O, np);
   std::vector<mjtNum> qpos(m->qpos0, m->qpos0 + m->nq), qvel(static_cast<size_t>(m->nv), 0.0),
       R(static_cast<size_t>(m->nv) * static_cast<size_t>(np));
   for (Eigen::Index i = 0; i < s.N; ++i) {
@@ -146,12 +146,13 @@ BlockColumns Diagnosis::columns(const PluginInstance& inst, const SplitData& s, 
     inst.plugin().regressor(inst.state(), m, qpos.data(), qvel.data(), R.data());
     // Inverse dynamics: tau = ... - force, and force = R theta.
     for (int o = 0; o < O; ++o)
-      for (int k = 0; k < np; ++k) C(o * s.N + i, k) = -R[static_cast<size_t>(s.cols->output_dof[static_cast<size_t>(o)] * np + k)];
+      for (int k = 0; k < np; ++k) C.set(o, i, k, -R[static_cast<size_t>(s.cols->output_dof[static_cast<size_t>(o)] * np + k)]);
   }
-  if (!C.allFinite())
+  if (!C.all_finite())
     throw PluginError("plugin '" + std::string(inst.plugin().name) + "' gave non-finite regressor values on split '" + s.name + "'");
-  if (filtered) filter_stacked(s.sos, C, s.N, s.runs);
-  return BlockColumns::from_dense(C, s.N, O);
+  return std::move(C).finish([&](Eigen::MatrixXd& part) {
+    if (filtered) filter_stacked(s.sos, part, s.N, s.runs);
+  });
 }
 
 // The columns of a candidate with its chosen shape on another split (test, cross).

@@ -15,6 +15,7 @@
 #include <cmath>
 
 #include "diagnosis.h"
+#include "parallel.h"
 #include "spml/row_matrix.h"
 #include "spml/signal.h"
 #include "statistics.h"
@@ -140,9 +141,13 @@ void Diagnosis::estimate_delay() {
     return rss_of({&base, &nuis}, target);
   };
   const double step = std::max(h / 4, 2 * delay_.range / 100);
-  double best = 0, best_rss = rss(0);
-  for (double d = -delay_.range; d <= delay_.range + 1e-12; d += step)
-    if (const double v = rss(d); v < best_rss) best = d, best_rss = v;
+  std::vector<double> grid{0};
+  for (double d = -delay_.range; d <= delay_.range + 1e-12; d += step) grid.push_back(d);
+  std::vector<double> values(grid.size());
+  parallel_for(grid.size(), [&](size_t i) { values[i] = rss(grid[i]); });   // independent designs
+  double best = 0, best_rss = values[0];
+  for (size_t i = 1; i < grid.size(); ++i)
+    if (values[i] < best_rss) best = grid[i], best_rss = values[i];
   nlopt::opt local(nlopt::LN_BOBYQA, 1);
   local.set_lower_bounds(std::max(-delay_.range, best - step));
   local.set_upper_bounds(std::min(delay_.range, best + step));

@@ -68,7 +68,7 @@ BlockColumns Diagnosis::simulated_columns(const PluginInstance& inst, const Spli
   };
   std::unique_ptr<mjData, NoDelete> d(dd);
   const int O = static_cast<int>(s.split.Y.cols());
-  Eigen::MatrixXd C = Eigen::MatrixXd::Zero(s.N * O, 1);
+  BlockBuilder C(s.N, O, 1);
   std::vector<mjtNum> qfrc(static_cast<size_t>(m->nv));
   if (inst.plugin().reset) inst.plugin().reset(inst.state());   // a declared plugin may be stateless (load.cc)
   for (Eigen::Index i = 0; i < s.N; ++i) {
@@ -78,7 +78,7 @@ BlockColumns Diagnosis::simulated_columns(const PluginInstance& inst, const Spli
     }
     std::fill(qfrc.begin(), qfrc.end(), 0.0);
     inst.plugin().compute(inst.state(), m, d.get(), qfrc.data());
-    for (int o = 0; o < O; ++o) C(o * s.N + i, 0) = -qfrc[static_cast<size_t>(s.cols->output_dof[static_cast<size_t>(o)])];
+    for (int o = 0; o < O; ++o) C.set(o, i, 0, -qfrc[static_cast<size_t>(s.cols->output_dof[static_cast<size_t>(o)])]);
     if (i + 1 == s.N) break;
     if (!inst.plugin().advance) continue;   // stateless: nothing to carry to the next row
     // To the next row in substeps of at most 5 ms, the velocity interpolated linearly: a
@@ -94,10 +94,9 @@ BlockColumns Diagnosis::simulated_columns(const PluginInstance& inst, const Spli
       inst.plugin().advance(inst.state(), m, d.get(), dt / steps);
     }
   }
-  if (!C.allFinite())
+  if (!C.all_finite())
     throw PluginError("plugin '" + std::string(inst.plugin().name) + "' gave non-finite forces along split '" + s.name + "'");
-  filter_stacked(s.sos, C, s.N);
-  return BlockColumns::from_dense(C, s.N, O);
+  return std::move(C).finish([&](Eigen::MatrixXd& part) { filter_stacked(s.sos, part, s.N); });
 }
 
 // The drop of the residual sum of squares the simulated force with parameters exp(x) gives
@@ -108,15 +107,18 @@ double Diagnosis::stateful_drop(const Candidate& c, const Fit& current, const st
   try {
     PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, v), "diagnose");
     const BlockColumns cols = simulated_columns(inst, fit_);
-    const Eigen::VectorXd F = cols.dense().col(0);
-    // Q^T F over the outputs the force acts on (its joint's): over all of them it was most of
-    // the undecimated Panda's search (14 560 rows x 7 outputs per evaluation).
+    // Q^T F, F^T r and |F|^2 over the outputs the force acts on (its joint's): over all of
+    // them it was most of the undecimated Panda's search (14 560 rows x 7 outputs per evaluation).
     Eigen::VectorXd QF = Eigen::VectorXd::Zero(current.Q().cols());
-    for (Eigen::Index o = 0; o * fit_.N < F.size(); ++o)
-      if (const auto seg = F.segment(o * fit_.N, fit_.N); seg.cwiseAbs().maxCoeff() > 0)
-        QF.noalias() += current.Q().middleRows(o * fit_.N, fit_.N).transpose() * seg;
-    if (force) *force = F - current.Q() * QF;   // the projected force
-    return 2 * current.residual.dot(F) - (F.squaredNorm() - QF.squaredNorm());
+    double rF = 0, FF = 0;
+    for (size_t a = 0; a < cols.active.size(); ++a) {
+      const Eigen::Index at = cols.active[a] * fit_.N;
+      QF.noalias() += current.Q().middleRows(at, fit_.N).transpose() * cols.parts[a].col(0);
+      rF += current.residual.segment(at, fit_.N).dot(cols.parts[a].col(0));
+      FF += cols.parts[a].squaredNorm();
+    }
+    if (force) *force = cols.dense().col(0) - current.Q() * QF;   // the projected force
+    return 2 * rF - (FF - QF.squaredNorm());
   } catch (const std::exception&) {
     return -std::numeric_limits<double>::infinity();
   }
