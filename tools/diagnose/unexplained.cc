@@ -38,6 +38,21 @@ constexpr double kNoiseMargin = 10;
 constexpr Eigen::Index kFitRows = 200;  // rows the GP is fitted on (evenly spaced; cubic cost)
 constexpr Eigen::Index kTestRows = 1500;
 
+// OpenBLAS (the GP's LAPACK, CMakeLists.txt) sizes its thread pool for large matrices; these
+// are 200 x 200, where its threads only wait for each other, and on a loaded machine their
+// spinning made this stage of a 1 s diagnose take 4 to 23 s. One thread while it runs.
+extern "C" {
+void openblas_set_num_threads(int);
+int openblas_get_num_threads(void);
+}
+struct OneBlasThread {
+  int previous = openblas_get_num_threads();
+  OneBlasThread() { openblas_set_num_threads(1); }
+  ~OneBlasThread() { openblas_set_num_threads(previous); }
+  OneBlasThread(const OneBlasThread&) = delete;
+  OneBlasThread& operator=(const OneBlasThread&) = delete;
+};
+
 // Rows `rows` of X, each column standardized by (mean, std) of the fit split.
 Eigen::MatrixXd standardized(const Eigen::MatrixXd& X, const std::vector<Eigen::Index>& rows, const Eigen::RowVectorXd& mean,
                              const Eigen::RowVectorXd& sd) {
@@ -138,6 +153,7 @@ nlohmann::json Diagnosis::unexplained(const std::string& out_dir, const Eigen::V
   std::ostringstream csv;
   csv.precision(10);
   csv << "joint,input,value,residual,gp\n";
+  const OneBlasThread one_thread;
   for (size_t o = 0; o < out_joints_.size(); ++o) {
     if (still_[static_cast<size_t>(out_joint_index_[o])]) continue;
     try {
