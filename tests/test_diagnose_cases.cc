@@ -750,7 +750,9 @@ TEST(DiagnoseCases, ReportUnitsFollowTheJointType) {
 }
 
 // fit_blocks factors a long design in row chunks (diagnose_detail::Factors): the same fit as one
-// column-pivoted QR of the whole design, and rss_of the same minimum by the normal equations.
+// column-pivoted QR of the whole design (residual, prediction, rank, robust errors; which of
+// exactly collinear columns is kept is rounding's pick in both), and rss_of the same minimum
+// by the normal equations.
 // 3 outputs x 20 000 rows (two chunks), a base block over every output with one column an exact
 // combination of two others, and a one-output block as a cause.
 TEST(DiagnoseDesign, ChunkedFactorizationIsOnePivotedQr) {

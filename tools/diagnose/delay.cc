@@ -12,6 +12,7 @@
 #include <nlopt.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 #include "diagnosis.h"
@@ -132,13 +133,14 @@ void Diagnosis::estimate_delay() {
   // then be credited with (exact-input draws named a delay on white noise that way).
   const BlockColumns nuisance = coulomb_nuisance(fit_);
   const Eigen::VectorXd target = net_of_frictionloss(fit_);
+  auto design = [&](double d) { return std::array<BlockColumns, 2>{shifted_block(fit_.base, d, h), shifted_block(nuisance, d, h)}; };
   auto projected = [&](double d) {
-    const BlockColumns base = shifted_block(fit_.base, d, h), nuis = shifted_block(nuisance, d, h);
-    return fit_blocks({&base, &nuis}, target, false).residual;
+    const auto D = design(d);
+    return fit_blocks({&D[0], &D[1]}, target, false).residual;
   };
-  auto rss = [&](double d) {
-    const BlockColumns base = shifted_block(fit_.base, d, h), nuis = shifted_block(nuisance, d, h);
-    return rss_of({&base, &nuis}, target);
+  auto rss = [&](double d) {   // the same minimum, by the normal equations (rss_of): the grid's hundred designs
+    const auto D = design(d);
+    return rss_of({&D[0], &D[1]}, target);
   };
   const double step = std::max(h / 4, 2 * delay_.range / 100);
   std::vector<double> grid{0};

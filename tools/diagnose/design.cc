@@ -71,8 +71,11 @@ Eigen::MatrixXd dense_of(const std::vector<const BlockColumns*>& blocks, Eigen::
 
 // fit_blocks' factorization, kept for the basis: F's rows in chunks, F_c = Q_c R_c each (on
 // the machine's cores), the stacked R_c = Qs R0, and the rank-revealing pivoted QR of the small
-// R0 P = Q1 R. Every stage is orthogonal, so the pivots and the rank are those of one pivoted
-// QR of F; the chunks follow the size of F alone (the same numbers on any machine).
+// R0 P = Q1 R. Every stage is orthogonal, so in exact arithmetic the pivots and the rank are
+// those of one pivoted QR of F; where columns tie (one a multiple of another after scaling) or
+// a pivot lies at the tolerance, rounding picks the column kept, in either. The residual and
+// the prediction do not depend on that pick. The chunks follow the size of F alone, so the
+// numbers are the same on any machine.
 struct Factors {
   std::vector<Eigen::Index> starts;   // first row of each chunk, then the row count
   std::vector<Eigen::HouseholderQR<Eigen::MatrixXd>> chunks;
@@ -87,8 +90,9 @@ struct Factors {
 
   void compute(const Eigen::MatrixXd& F) {
     cols = F.cols();
-    // A chunk per 25 000 rows, at most four: the Householder sweeps of one chunk stay in cache
-    // far better than over 10^5 rows, and the chunks factor in parallel.
+    // Chunks of 25 000 to 50 000 rows, at most four (longer designs get longer chunks): the
+    // Householder sweeps of one chunk stay in cache far better than over 10^5 rows, and the
+    // chunks factor in parallel.
     const auto n = std::clamp<Eigen::Index>(F.rows() / 25000, 1, 4);
     for (Eigen::Index c = 0; c <= n; ++c) starts.push_back(F.rows() * c / n);
     chunks.resize(static_cast<size_t>(n));
@@ -178,7 +182,7 @@ Fit fit_blocks(const std::vector<const BlockColumns*>& blocks, const Eigen::Vect
   for (Eigen::Index k = 0; k < cols; ++k) scale[k] = scale[k] > 0 ? scale[k] : 1.0;
   F *= scale.cwiseInverse().asDiagonal();
   // Not one column-pivoted QR of F, which sweeps all rows column by column (on the
-  // undecimated Panda, 20 000 x 7 rows, it was half the run): see Factors.
+  // undecimated Panda, 14 560 fit rows x 7 joints, it was half the run): see Factors.
   auto fac = std::make_shared<Factors>();
   fac->compute(F);
   // Rank from the pivots of the unit-norm columns (they fall monotonically).

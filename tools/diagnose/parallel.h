@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <atomic>
 #include <exception>
+#include <system_error>
 #include <thread>
 #include <vector>
 
@@ -26,7 +27,11 @@ void parallel_for(size_t n, const F& f) {
   };
   const size_t threads = std::min<size_t>(n, std::clamp(std::thread::hardware_concurrency(), 1u, 4u));
   std::vector<std::thread> pool;
-  for (size_t t = 1; t < threads; ++t) pool.emplace_back(work);
+  try {
+    for (size_t t = 1; t < threads; ++t) pool.emplace_back(work);
+  } catch (const std::system_error&) {
+    // no more threads to be had: the ones started and this one do the rest
+  }
   work();
   for (auto& t : pool) t.join();
   for (const auto& e : failed)
