@@ -14,6 +14,36 @@ namespace spml::diagnose_detail {
 // span of the columns already there: well above rounding, well below any real effect.
 constexpr double kRankTolerance = 1e-6;
 
+namespace {
+
+// The pseudo-inverse of a Gram matrix G of columns scaled to unit norm (scale: 1 / their norms,
+// 0 for a zero column), without the directions whose eigenvalue is at most kRankTolerance^2 -
+// the same test of a new direction as fit_blocks' pivots. For gain_of (G the columns' part
+// outside the current basis) and rss_of (the whole design).
+struct UnitGramInverse {
+  Eigen::VectorXd scale;
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig;
+  Eigen::VectorXd inv;   // 1 / eigenvalue, 0 for the directions left out
+  int rank = 0;
+  UnitGramInverse(const Eigen::MatrixXd& G, const Eigen::VectorXd& squared_norms) : scale(squared_norms.cwiseSqrt()) {
+    for (Eigen::Index k = 0; k < scale.size(); ++k) scale[k] = scale[k] > 0 ? 1.0 / scale[k] : 0.0;
+    eig.compute(scale.asDiagonal() * G * scale.asDiagonal());
+    inv = eig.eigenvalues();
+    for (Eigen::Index k = 0; k < inv.size(); ++k) {
+      inv[k] = inv[k] > kRankTolerance * kRankTolerance ? 1.0 / inv[k] : 0.0;
+      rank += inv[k] > 0;
+    }
+  }
+  // The eigen-coordinates of the scaled right-hand side D rhs.
+  Eigen::VectorXd project(const Eigen::VectorXd& rhs) const { return eig.eigenvectors().transpose() * (scale.asDiagonal() * rhs); }
+  // D (D G D)^+ D rhs: the least-squares coefficients of the unscaled columns.
+  Eigen::VectorXd solve(const Eigen::VectorXd& rhs) const {
+    return scale.asDiagonal() * (eig.eigenvectors() * inv.cwiseProduct(project(rhs)));
+  }
+};
+
+}  // namespace
+
 Eigen::MatrixXd BlockColumns::dense() const {
   Eigen::MatrixXd M = Eigen::MatrixXd::Zero(rows_per_output * outputs, cols);
   for (size_t a = 0; a < active.size(); ++a) M.middleRows(active[a] * rows_per_output, rows_per_output) = parts[a];
@@ -249,18 +279,10 @@ double rss_of(const std::vector<const BlockColumns*>& blocks, const Eigen::Vecto
             blocks[b]->parts[a].transpose() * v.segment(blocks[b]->active[a] * blocks[b]->rows_per_output, blocks[b]->rows_per_output);
     return out;
   };
-  // Unit-norm columns, as in fit_blocks and gain_of, so that one tolerance tells directions apart.
-  Eigen::VectorXd scale = G.diagonal().cwiseSqrt();
-  for (Eigen::Index k = 0; k < scale.size(); ++k) scale[k] = scale[k] > 0 ? 1.0 / scale[k] : 0.0;
-  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(scale.asDiagonal() * G * scale.asDiagonal());
-  Eigen::VectorXd inv = eig.eigenvalues();
-  for (Eigen::Index k = 0; k < inv.size(); ++k) inv[k] = inv[k] > kRankTolerance * kRankTolerance ? 1.0 / inv[k] : 0.0;
-  auto solve = [&](const Eigen::VectorXd& rhs) {   // (D G D)^+ D rhs, back to the unscaled columns
-    return Eigen::VectorXd(scale.asDiagonal() * (eig.eigenvectors() * (inv.asDiagonal() * (eig.eigenvectors().transpose() * (scale.asDiagonal() * rhs)))));
-  };
-  Eigen::VectorXd coef = solve(transpose_times(y));
-  Eigen::VectorXd r = y - predict_blocks(blocks, coef, y.size());
-  coef += solve(transpose_times(r));   // one step of refinement
+  const UnitGramInverse Ginv(G, G.diagonal());
+  Eigen::VectorXd coef = Ginv.solve(transpose_times(y));
+  const Eigen::VectorXd r = y - predict_blocks(blocks, coef, y.size());
+  coef += Ginv.solve(transpose_times(r));   // one step of refinement
   return (y - predict_blocks(blocks, coef, y.size())).squaredNorm();
 }
 
@@ -318,23 +340,13 @@ Gain gain_of(const BlockColumns& C, const Eigen::MatrixXd& Q, const Eigen::Vecto
     CtC.noalias() += C.parts[a].transpose() * C.parts[a];
     g.noalias() += C.parts[a].transpose() * r.segment(rows, N);
   }
-  Eigen::VectorXd scale = CtC.diagonal().cwiseSqrt();
   Gain out;
-  if (scale.size() == 0) return out;
-  for (Eigen::Index k = 0; k < scale.size(); ++k) scale[k] = scale[k] > 0 ? 1.0 / scale[k] : 0.0;
-  Eigen::MatrixXd G = scale.asDiagonal() * (CtC - QtC.transpose() * QtC) * scale.asDiagonal();
-  g = scale.asDiagonal() * g;
-  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(G);
-  out.coef = Eigen::VectorXd::Zero(G.rows());
-  for (Eigen::Index k = 0; k < G.rows(); ++k) {
-    const double lambda = eig.eigenvalues()[k];
-    if (lambda <= kRankTolerance * kRankTolerance) continue;
-    const double proj = eig.eigenvectors().col(k).dot(g);
-    out.rss_drop += proj * proj / lambda;
-    out.coef += eig.eigenvectors().col(k) * (proj / lambda);
-    ++out.rank;
-  }
-  out.coef = scale.asDiagonal() * out.coef;
+  if (C.cols == 0) return out;
+  const UnitGramInverse Ginv(CtC - QtC.transpose() * QtC, CtC.diagonal());
+  const Eigen::VectorXd proj = Ginv.project(g);
+  out.rss_drop = proj.cwiseAbs2().dot(Ginv.inv);
+  out.coef = Ginv.solve(g);
+  out.rank = Ginv.rank;
   out.rss_drop = std::min(out.rss_drop, r.squaredNorm());
   return out;
 }
