@@ -119,7 +119,7 @@ double Diagnosis::stateful_drop(const Candidate& c, const Fit& current, const st
     }
     if (force) *force = cols.dense().col(0) - current.Q() * QF;   // the projected force
     return 2 * rF - (FF - QF.squaredNorm());
-  } catch (const std::exception&) {
+  } catch (const PluginError&) {   // parameters the plugin refuses, or non-finite forces
     return -std::numeric_limits<double>::infinity();
   }
 }
@@ -145,7 +145,7 @@ std::map<std::string, double> Diagnosis::static_start(const Candidate& c, const 
       for (size_t k = 0; k < names.size() && k < static_cast<size_t>(a.size()); ++k)
         values[names[k].substr(names[k].rfind('.') + 1)] = a[static_cast<Eigen::Index>(k)];
       for (size_t k = 0; k < s.shape.size(); ++k) values[s.shape[k]->key] = s.shape_values[k];
-    } catch (const std::exception&) {
+    } catch (const PluginError&) {
       continue;
     }
     bool shares = false;
