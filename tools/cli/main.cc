@@ -1,8 +1,8 @@
 #include <cstdio>
-#include <malloc.h>
 #include <exception>
 #include <filesystem>
 #include <iostream>
+#include <malloc.h>
 #include <new>
 
 #include <mujoco/mujoco.h>

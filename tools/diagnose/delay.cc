@@ -58,8 +58,9 @@ Eigen::MatrixXd shifted_columns(const Eigen::MatrixXd& X, double d, double h) {
       const Eigen::Index k = i + k0;
       out(i, c) = k < 0 || k + 1 > n - 1 ? at(k + (u >= 0.5 ? 1 : 0)) : h00 * at(k) + h10 * slope(k) + h01 * at(k + 1) + h11 * slope(k + 1);
     };
-    for (Eigen::Index i = 0; i < (last >= first ? first : n); ++i) end_row(i);
-    for (Eigen::Index i = std::max(last + 1, first); last >= first && i < n; ++i) end_row(i);
+    // [0, first) and (last, n): every row once, as last = first - 1 when no row is inside.
+    for (Eigen::Index i = 0; i < first; ++i) end_row(i);
+    for (Eigen::Index i = last + 1; i < n; ++i) end_row(i);
   }
   return out;
 }

@@ -5,8 +5,8 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
-#include <stdexcept>
 #include <limits>
+#include <stdexcept>
 
 namespace spml::diagnose_detail {
 
@@ -108,6 +108,7 @@ Eigen::MatrixXd dense_of(const std::vector<const BlockColumns*>& blocks, Eigen::
 // numbers are the same on any machine.
 struct Factors {
   std::vector<Eigen::Index> starts;   // first row of each chunk, then the row count
+  std::vector<Eigen::Index> stacked;  // first row of each chunk's R in the stack, then its row count
   std::vector<Eigen::HouseholderQR<Eigen::MatrixXd>> chunks;
   Eigen::HouseholderQR<Eigen::MatrixXd> stack;   // with more than one chunk
   Eigen::ColPivHouseholderQR<Eigen::MatrixXd> inner;
@@ -128,35 +129,26 @@ struct Factors {
     chunks.resize(static_cast<size_t>(n));
     parallel_for(chunks.size(), [&](size_t c) { chunks[c].compute(F.middleRows(starts[c], rows_of(c))); });
     square = std::min(cols, F.rows());
+    stacked = {0};
+    for (size_t c = 0; c < count(); ++c) stacked.push_back(stacked.back() + top_of(c));
     if (count() == 1) {
       inner.compute(chunks[0].matrixQR().topRows(square).triangularView<Eigen::Upper>());
       return;
     }
-    Eigen::MatrixXd stacked(0, cols);
-    for (size_t c = 0; c < count(); ++c) {
-      stacked.conservativeResize(stacked.rows() + top_of(c), Eigen::NoChange);
-      stacked.bottomRows(top_of(c)) = chunks[c].matrixQR().topRows(top_of(c)).triangularView<Eigen::Upper>();
-    }
-    stack.compute(stacked);
+    Eigen::MatrixXd Rs(stacked.back(), cols);
+    for (size_t c = 0; c < count(); ++c) Rs.middleRows(stacked[c], top_of(c)) = chunks[c].matrixQR().topRows(top_of(c)).triangularView<Eigen::Upper>();
+    stack.compute(Rs);
     inner.compute(stack.matrixQR().topRows(square).triangularView<Eigen::Upper>());
   }
   // Q^T y, the first `rank` entries (Q the orthogonal factor of F P).
   Eigen::VectorXd adjoint_times(const Eigen::VectorXd& y) const {
-    std::vector<Eigen::VectorXd> heads(count());
+    Eigen::VectorXd t(stacked.back());   // the square R0's rows when there is one chunk
     parallel_for(count(), [&](size_t c) {
-      Eigen::VectorXd t = y.segment(starts[c], rows_of(c));
-      t.applyOnTheLeft(chunks[c].householderQ().adjoint());
-      heads[c] = t.head(top_of(c));
+      Eigen::VectorXd part = y.segment(starts[c], rows_of(c));
+      part.applyOnTheLeft(chunks[c].householderQ().adjoint());
+      t.segment(stacked[c], top_of(c)) = part.head(top_of(c));
     });
-    Eigen::VectorXd t = heads[0];
-    if (count() > 1) {
-      t.resize(0);
-      for (const auto& h : heads) {
-        t.conservativeResize(t.size() + h.size());
-        t.tail(h.size()) = h;
-      }
-      t.applyOnTheLeft(stack.householderQ().adjoint());
-    }
+    if (count() > 1) t.applyOnTheLeft(stack.householderQ().adjoint());
     Eigen::VectorXd t1 = t.head(square);
     t1.applyOnTheLeft(inner.householderQ().adjoint());
     return t1.head(rank);
@@ -168,18 +160,14 @@ struct Factors {
     small.applyOnTheLeft(inner.householderQ());
     Eigen::MatrixXd mid = small;
     if (count() > 1) {
-      Eigen::Index total = 0;
-      for (size_t c = 0; c < count(); ++c) total += top_of(c);
-      mid = Eigen::MatrixXd::Zero(total, top.cols());
+      mid = Eigen::MatrixXd::Zero(stacked.back(), top.cols());
       mid.topRows(square) = small;
       mid.applyOnTheLeft(stack.householderQ());
     }
-    std::vector<Eigen::Index> at{0};
-    for (size_t c = 0; c < count(); ++c) at.push_back(at.back() + top_of(c));
     Eigen::MatrixXd out(starts.back(), top.cols());
     parallel_for(count(), [&](size_t c) {
       Eigen::MatrixXd part = Eigen::MatrixXd::Zero(rows_of(c), top.cols());
-      part.topRows(top_of(c)) = mid.middleRows(at[c], top_of(c));
+      part.topRows(top_of(c)) = mid.middleRows(stacked[c], top_of(c));
       part.applyOnTheLeft(chunks[c].householderQ());
       out.middleRows(starts[c], rows_of(c)) = part;
     });
@@ -261,15 +249,19 @@ double rss_of(const std::vector<const BlockColumns*>& blocks, const Eigen::Vecto
   // F^T F and F^T v block by block, over the outputs both blocks act on (the nuisance blocks
   // are one output each, so most of a dense F is zeros).
   Eigen::MatrixXd G = Eigen::MatrixXd::Zero(cols, cols);
-  for (size_t b1 = 0; b1 < blocks.size(); ++b1)
-    for (size_t b2 = 0; b2 <= b1; ++b2)
-      for (size_t a1 = 0; a1 < blocks[b1]->active.size(); ++a1)
-        for (size_t a2 = 0; a2 < blocks[b2]->active.size(); ++a2)
-          if (blocks[b1]->active[a1] != blocks[b2]->active[a2]) continue;
-          else if (b1 == b2)   // the lower triangle only
-            G.block(off[b1], off[b1], blocks[b1]->cols, blocks[b1]->cols).selfadjointView<Eigen::Lower>().rankUpdate(blocks[b1]->parts[a1].transpose());
-          else
-            G.block(off[b1], off[b2], blocks[b1]->cols, blocks[b2]->cols).noalias() += blocks[b1]->parts[a1].transpose() * blocks[b2]->parts[a2];
+  for (size_t b1 = 0; b1 < blocks.size(); ++b1) {
+    const BlockColumns& B1 = *blocks[b1];
+    for (size_t a1 = 0; a1 < B1.active.size(); ++a1) {
+      // The diagonal block's lower triangle, then the blocks before it that act on this output.
+      G.block(off[b1], off[b1], B1.cols, B1.cols).selfadjointView<Eigen::Lower>().rankUpdate(B1.parts[a1].transpose());
+      for (size_t b2 = 0; b2 < b1; ++b2) {
+        const BlockColumns& B2 = *blocks[b2];
+        const auto a2 = std::find(B2.active.begin(), B2.active.end(), B1.active[a1]);
+        if (a2 != B2.active.end())
+          G.block(off[b1], off[b2], B1.cols, B2.cols).noalias() += B1.parts[a1].transpose() * B2.parts[static_cast<size_t>(a2 - B2.active.begin())];
+      }
+    }
+  }
   G.triangularView<Eigen::StrictlyUpper>() = G.transpose();
   auto transpose_times = [&](const Eigen::VectorXd& v) {
     Eigen::VectorXd out = Eigen::VectorXd::Zero(cols);
