@@ -31,10 +31,11 @@ struct FilterPlan {
 
 // The plan for a dataset: its recorded `filter` attribute (the torques already went through
 // it: only the model's columns are filtered), else - when the accelerations hold noise above
-// the band the positions excite - a low-pass at five times that band on torques and columns.
-// `qdd`, `q`: per joint, the fit split's columns; `rate_hz`: its sampling rate (0: none).
+// the band the positions excite, or the model's error does - a low-pass at five times that
+// band on torques and columns. `qdd`, `q`: per joint, the fit split's columns; `residual`: per
+// output, the fit split's torques minus the model as given; `rate_hz`: its sampling rate (0: none).
 FilterPlan plan_filter(const Dataset& ds, const std::vector<Eigen::VectorXd>& q, const std::vector<Eigen::VectorXd>& qdd,
-                       double rate_hz, std::vector<std::string>& notes);
+                       const std::vector<Eigen::VectorXd>& residual, double rate_hz, std::vector<std::string>& notes);
 
 // The sections for one split (empty when the plan is none, the split has no time stamps, or
 // the cut-off lies at or above 0.4 of its sampling rate: nothing left to filter).

@@ -54,8 +54,10 @@ void Diagnosis::plan_parallel_filter() {
     q.push_back(fit_.split.X.col(fit_.cols->q[static_cast<size_t>(j)]));
     qdd.push_back(fit_.split.X.col(fit_.cols->qdd[static_cast<size_t>(j)]));
   }
+  std::vector<Eigen::VectorXd> residual;
+  for (Eigen::Index o = 0; o * fit_.N < fit_.y0.size(); ++o) residual.push_back(fit_.y0.segment(o * fit_.N, fit_.N));
   const double dt = fit_.split.t.size() == fit_.split.rows() ? median_step(fit_.split.t) : 0;
-  filter_plan_ = plan_filter(ds_, q, qdd, dt > 0 ? 1 / dt : 0, notes_);
+  filter_plan_ = plan_filter(ds_, q, qdd, residual, dt > 0 ? 1 / dt : 0, notes_);
   apply_filter(fit_);
   if (filter_plan_.source != FilterPlan::Source::none && fit_.sos.empty())
     filter_plan_.description += "; not applied: the cut-off (" + fmt(filter_plan_.lowpass.cutoff_hz) +
