@@ -168,9 +168,11 @@ BlockColumns Diagnosis::columns_of(const Candidate& c, const SplitData& s) const
 // a constraint's stick phases), not a cause. Terms that are not sign-definite (ripple, offset)
 // are free. Checked on the unfiltered columns: the filter smears signs at reversals.
 // A viscous column (proportional to q̇ wherever it acts, e.g. asymmetric friction's fv_pos) adds
-// to the joint's own MJCF damping: a negative coefficient lowers that damping and feeds the joint
-// energy only beyond it (EMPS: damping 200, fv_pos -33.6 is a correction, not a pump).
-bool Diagnosis::within_damping(const Eigen::VectorXd& col, int joint, double coef) const {
+// to the joint's own damping: a negative coefficient lowers that damping and feeds the joint
+// energy only beyond it (EMPS: damping 200, fv_pos -33.6 is a correction, not a pump). The
+// damping is the MJCF's, or `damping` when the base parameters were refitted beside it (the
+// joint's q̇ column is a base column too, and the fit splits the shared part between them).
+bool Diagnosis::within_damping(const Eigen::VectorXd& col, int joint, double coef, double damping) const {
   const mjModel* m = reg_->model();
   const Eigen::Index N = fit_.N;
   double slope = 0;
@@ -185,10 +187,17 @@ bool Diagnosis::within_damping(const Eigen::VectorXd& col, int joint, double coe
       else if (std::abs(r - slope) > 1e-9 * std::abs(slope)) return false;   // not proportional to q̇
     }
   }
-  return slope > 0 && m->dof_damping[m->jnt_dofadr[joint]] + slope * coef >= 0;
+  return slope > 0 && (std::isfinite(damping) ? damping : m->dof_damping[m->jnt_dofadr[joint]]) + slope * coef >= 0;
 }
 
-std::string Diagnosis::injects_energy(const Candidate& c, const Eigen::VectorXd& theta) const {
+double Diagnosis::refitted_damping(int joint, const Fit& f) const {
+  const std::string name = "damping:" + reg_->joint_names()[static_cast<size_t>(joint)];
+  for (int i = 0; i < base_.rank && i < f.coef.size(); ++i)
+    if (base_.names[static_cast<size_t>(i)] == name && f.determined[static_cast<size_t>(i)]) return base_.model_values[i] + f.coef[i];
+  return std::numeric_limits<double>::quiet_NaN();
+}
+
+std::string Diagnosis::injects_energy(const Candidate& c, const Eigen::VectorXd& theta, double damping) const {
   PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
   const BlockColumns cols = columns(inst, fit_, false);
   const Eigen::MatrixXd C = cols.dense();
@@ -206,7 +215,7 @@ std::string Diagnosis::injects_energy(const Candidate& c, const Eigen::VectorXd&
         acts |= power < 0;
       }
     }
-    if (opposes && acts && !within_damping(C.col(k), c.joint, theta[k]))
+    if (opposes && acts && !within_damping(C.col(k), c.joint, theta[k], damping))
       return names[static_cast<size_t>(k)] + " = " + fmt(theta[k]) + " < 0 on a term that opposes the motion at every sample: negative "
              "friction would feed the joint energy, not dissipate it";
   }
@@ -235,11 +244,11 @@ std::string Diagnosis::outside_its_form(const Candidate& c, const Eigen::VectorX
   return "";
 }
 
-std::string Diagnosis::refused(int candidate, const Eigen::VectorXd& theta) const {
+std::string Diagnosis::refused(int candidate, const Eigen::VectorXd& theta, double damping) const {
   const Candidate& c = cands_[static_cast<size_t>(candidate)];
   if (c.stateful) return theta.size() == 1 && theta[0] > 0 ? "" : "the simulated force would enter with a negative amplitude";   // #22
   if (std::string form = outside_its_form(c, theta); !form.empty()) return form;
-  const std::string pumping = injects_energy(c, theta);
+  const std::string pumping = injects_energy(c, theta, damping);
   if (!pumping.empty()) return pumping;
   try {
     PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");

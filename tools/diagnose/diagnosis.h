@@ -184,10 +184,12 @@ class Diagnosis {
   BlockColumns columns_of(const Candidate& c, const SplitData& s) const;
   // "" when the plugin accepts its fitted parameters (written back through write_config and
   // created again), else its reason: a negative band level is not a friction band.
-  std::string refused(int candidate, const Eigen::VectorXd& theta) const;
+  // `damping`: the joint's damping the fit stands beside (NaN: the MJCF's), see within_damping.
+  std::string refused(int candidate, const Eigen::VectorXd& theta, double damping = std::numeric_limits<double>::quiet_NaN()) const;
+  double refitted_damping(int joint, const Fit& f) const;   // NaN when damping is no base parameter of its own
   static std::string outside_its_form(const Candidate& c, const Eigen::VectorXd& theta);
-  std::string injects_energy(const Candidate& c, const Eigen::VectorXd& theta) const;
-  bool within_damping(const Eigen::VectorXd& col, int joint, double coef) const;
+  std::string injects_energy(const Candidate& c, const Eigen::VectorXd& theta, double damping) const;
+  bool within_damping(const Eigen::VectorXd& col, int joint, double coef, double damping) const;
   // shape_search.cc
   double search_shape(Candidate& c, const Fit& current);
   // estimate.cc
@@ -199,6 +201,7 @@ class Diagnosis {
   // selection.cc
   void select();
   void score_candidates(const Fit& current, const std::vector<int>& chosen, const std::set<int>& research, std::vector<int>& order);
+  bool nests(int larger, int smaller) const;
   bool evidence_holds(int candidate, const Fit& smaller, const Fit& larger) const;
   bool cause_needed(size_t i, const std::vector<size_t>& set, bool base_free) const;
   void eliminate_backward(bool base_free = true);
