@@ -206,9 +206,22 @@ bool Diagnosis::refit_written_effects(const std::string& ext_path, MjcfEdits& ed
       if (text == edits.texts.end()) continue;
       const std::string why = refused(causes_[i].candidate, theta);
       if (!why.empty()) {
-        edits.texts.erase(text);
-        cj["rejected"] = {{"reason", "fitted with the parameters extended.xml states, " + why + "; extended.xml leaves it out"},
-                          {"summary", "refused once fitted with the written parameters"}};
+        // A later cause on the same joint joined on the evidence left beside this one: when the
+        // two fitted together make this one refused, the later one goes (a marginal band, Delta
+        // BIC 36, beside a hidden Stribeck curve of Delta BIC 1093 had the curve refused).
+        size_t drop = i;
+        for (size_t k : live)
+          if (k > i && cands_[static_cast<size_t>(causes_[k].candidate)].joint == c.joint) drop = k;
+        nlohmann::json& dj = causes[first + drop];
+        auto dtext = std::find_if(edits.texts.begin(), edits.texts.end(), [&](const auto& t) { return t.second == dj["declaration"].get<std::string>(); });
+        if (dtext != edits.texts.end()) edits.texts.erase(dtext);
+        if (drop == i)
+          dj["rejected"] = {{"reason", "fitted with the parameters extended.xml states, " + why + "; extended.xml leaves it out"},
+                            {"summary", "refused once fitted with the written parameters"}};
+        else
+          dj["rejected"] = {{"reason", "fitted beside it with the parameters extended.xml states, the earlier " + std::string(c.plugin->name) + " on " +
+                                           c.joint_name + " is refused (" + why + "); extended.xml leaves this later cause out"},
+                            {"summary", "made an earlier cause on its joint refused"}};
         again = changed = true;
         break;
       }
