@@ -30,7 +30,6 @@ constexpr double kMaxDelay = 0.05;
 // tick's start leads the states by half a tick (measured: 0.4 ms at 1 kHz on simulated logs
 // with no delay at all); that is the logger's sampling, not a fault of the wiring.
 constexpr double kMinDelay = 1e-3;
-constexpr double kMinDelayGain = 0.1;   // the held-out residual sum of squares must fall by this much
 
 // The columns of X sampled on a uniform grid (step h), evaluated at i + d/h for every row i:
 // cubic Hermite with central-difference slopes, held at the ends. The rows whose four
@@ -230,6 +229,7 @@ void Diagnosis::delay_decide(double d, const std::function<Eigen::VectorXd(doubl
   delay_.y0_fit = fit_.y0;
   delay_.y0_test = test_.y0;
   auto correct = [&](SplitData& s) {
+    delay_.other.push_back({&s, s.split.Y, s.b, s.y0});
     s.split.Y = shifted_columns(s.split.Y, d, uniform_step(s));
     s.b = targets_at(s, 0);
     s.y0 = s.b - s.given;
@@ -238,9 +238,29 @@ void Diagnosis::delay_decide(double d, const std::function<Eigen::VectorXd(doubl
   correct(test_);
   for (auto& [file, s] : cross_)
     if (uniform_step(s) > 0) correct(s);
-  notes_.push_back("the torques lag the states by " + fmt(d) + " ± " + fmt(delay_.stderr_, 2) +
-                   " s (cause `delay`): corrected in the data before the other causes were estimated; an MJCF cannot hold a "
-                   "delay, so shift the torque log by " + fmt(-d) + " s (or fix the logger) before using extended.xml on it");
+  delay_.note = "the torques lag the states by " + fmt(d) + " ± " + fmt(delay_.stderr_, 2) +
+                " s (cause `delay`): corrected in the data before the other causes were estimated; an MJCF cannot hold a "
+                "delay, so shift the torque log by " + fmt(-d) + " s (or fix the logger) before using extended.xml on it";
+  notes_.push_back(delay_.note);
+}
+
+// The data on the other side of the correction: as measured while corrected, and back.
+void Diagnosis::swap_delay() {
+  for (auto& o : delay_.other) {
+    o.split->split.Y.swap(o.Y);
+    o.split->b.swap(o.b);
+    o.split->y0.swap(o.y0);
+  }
+}
+
+// The delay given up once swap_delay() put the data as measured back: reported, not named.
+void Diagnosis::drop_delay() {
+  delay_.other.clear();
+  delay_.named = false;
+  delay_.why = "an offset of " + fmt(delay_.seconds) + " s passed on its own, but the causes chosen on the data as measured explain "
+               "them better (evidence and held-out test): it was their effect read as a shift; not named, not corrected";
+  notes_.erase(std::remove(notes_.begin(), notes_.end(), delay_.note), notes_.end());
+  notes_.push_back("the " + delay_.why.substr(3));
 }
 
 // The `delay` entry of report.json (always), and its cause when named.

@@ -93,6 +93,9 @@ bool is_stateful(const spml_force_plugin& p);   // #22: advance/reset and no reg
 inline constexpr const char* kDiagnosedPrefix = "spml.plugin.diagnosed_";
 inline std::string declaration_name(const Candidate& c) { return kDiagnosedPrefix + std::string(c.plugin->name) + "_" + c.joint_name; }
 
+// #22: a delay worth correcting removes a tenth of the held-out residual (delay.cc).
+inline constexpr double kMinDelayGain = 0.1;
+
 // #22: the offset between torques and states (delay.cc).
 struct DelayResult {
   double seconds = 0, stderr_ = std::numeric_limits<double>::infinity(), delta_bic = 0, range = 0;
@@ -100,6 +103,15 @@ struct DelayResult {
   bool withheld = false;   // evidence and held-out gain pass, but the data cannot be trusted with it (raw differences)
   std::string why;
   Eigen::VectorXd y0_fit, y0_test;   // the fit and test targets before the correction (baseline)
+  // Each corrected split's torques, targets and residual of the other side of the correction
+  // (swap_delay: before it while corrected, after it while not).
+  struct Other {
+    SplitData* split;
+    Eigen::MatrixXd Y;
+    Eigen::VectorXd b, y0;
+  };
+  std::vector<Other> other;
+  std::string note;                  // the note that says it was corrected
 };
 
 struct Cause {
@@ -200,6 +212,7 @@ class Diagnosis {
   std::vector<int> outputs_of(int candidate) const;
   // selection.cc
   void select();
+  void forward_backward();
   void score_candidates(const Fit& current, const std::vector<int>& chosen, const std::set<int>& research, std::vector<int>& order);
   bool nests(int larger, int smaller) const;
   bool evidence_holds(int candidate, const Fit& smaller, const Fit& larger) const;
@@ -234,6 +247,9 @@ class Diagnosis {
   Eigen::VectorXd targets_at(const SplitData& s, double d) const;
   Eigen::VectorXd net_of_frictionloss(const SplitData& s) const;
   BlockColumns coulomb_nuisance(const SplitData& s) const;
+  void swap_delay();
+  void drop_delay();
+  double free_parameters(const std::vector<int>& causes, const Fit& f) const;
   nlohmann::json delay_report() const;
   nlohmann::json delay_cause() const;
   // stateful_fit.cc (#22)

@@ -72,10 +72,54 @@ void Diagnosis::score_candidates(const Fit& current, const std::vector<int>& cho
 
 // Forward: at each step the first of the best six candidates whose fitted parameters the
 // plugin accepts and which gains on the test split joins.
+// The delay was searched with only a constant and static friction beside the base parameters;
+// an effect the model lacks that is not of that kind (a ripple, a Stribeck curve) can be half
+// explained by a shift, and the causes chosen on the shifted data are then wrong. So when a
+// delay is named the causes are chosen twice, on the corrected data and on the data as
+// measured, and the delay stays only when its model beats the other by the delay's own bars:
+// evidence (Delta BIC with n_eff, counting every free parameter of both) and a tenth less
+// held-out residual. A hidden ripple of 5 % had a delay of -14.7 ms named, and with it
+// `parameters` and a band: on the data as measured the ripple alone fits to 17.7 against 6053.
 void Diagnosis::select() {
   auto t_delay = Clock::now();
   estimate_delay();   // #22: a delay is corrected before any other cause is estimated (delay.cc)
   result_.timings.search += since(t_delay);
+  if (!delay_.named) return forward_backward();
+  const std::vector<Candidate> fresh = cands_;
+  const nlohmann::json fresh_not_tried = not_tried_;
+  forward_backward();
+  const std::vector<int> kept_a = kept_effects();
+  const Fit fa = refit(kept_a, true);
+  const double test_a = residual_on(test_, kept_a, true, fa).squaredNorm(), k_a = free_parameters(kept_a, fa) + 1;
+  std::vector<Candidate> cands_a = std::move(cands_);
+  std::vector<Cause> causes_a = std::move(causes_);
+  nlohmann::json not_tried_a = std::move(not_tried_);
+  swap_delay();
+  cands_ = fresh;
+  causes_.clear();
+  not_tried_ = fresh_not_tried;
+  forward_backward();
+  const std::vector<int> kept_b = kept_effects();
+  const Fit fb = refit(kept_b, true);
+  const double test_b = residual_on(test_, kept_b, true, fb).squaredNorm();
+  const double n_eff = static_cast<double>(fa.residual.size()) * effective_fraction(fa.residual, fit_.N);
+  const bool delay_wins = delta_bic(n_eff, fb.rss, fa.rss, k_a - free_parameters(kept_b, fb), rss_floor(fit_.b)) > opt_.bic_threshold &&
+                          gains_on_test(test_b, test_a, std::max(opt_.min_gain, kMinDelayGain), rss_floor(test_.b));
+  if (!delay_wins) return drop_delay();
+  swap_delay();
+  cands_ = std::move(cands_a);
+  causes_ = std::move(causes_a);
+  not_tried_ = std::move(not_tried_a);
+}
+
+// Free parameters of a fit with `causes`: its rank and the causes' shape keys.
+double Diagnosis::free_parameters(const std::vector<int>& causes, const Fit& f) const {
+  double k = f.rank;
+  for (int c : causes) k += static_cast<double>(cands_[static_cast<size_t>(c)].shape.size());
+  return k;
+}
+
+void Diagnosis::forward_backward() {
   std::vector<int> chosen;
   std::set<int> research;   // joints whose candidates need a new shape search
   for (size_t j = 0; j < still_.size(); ++j) research.insert(static_cast<int>(j));
