@@ -311,6 +311,24 @@ Measurement noise_level(double torque_noise, int bits) {
   return m;
 }
 
+// Clean draws of the seed table (1 kHz, 18 bit, 1 % torque noise, 10 Hz import): the torque
+// held over each tick puts the states -0.25 to -0.42 ms ahead of it. Not named (below the 1 ms
+// floor), but left in, it read the inertias' torque as damping (0.49 for 0.5 on every joint,
+// beyond three standard errors) and `parameters` was named on 5 of 8 draws. Resolved offsets
+// are now corrected without a name: seeds 3 and 6 (-0.40 +- 0.04 and -0.35 +- 0.03 ms) name
+// nothing.
+TEST(DiagnoseBeyond, TheLoggersHalfTickIsCorrectedWithoutAName) {
+  const auto dir = test::temp_dir("halftick");
+  for (int s : {3, 6}) {
+    const Draw d = make_draw(dir, "clean", s, 0, noise_level(0.01, 18));
+    const auto r = run_draw(dir, d, s);
+    EXPECT_TRUE(named(r).empty()) << "seed " << s << ": " << joined(named(r));
+    EXPECT_FALSE(r["delay"]["named"].get<bool>());
+    EXPECT_TRUE(r["delay"]["corrected"].get<bool>()) << r["delay"].dump();
+    EXPECT_LT(r["delay"]["seconds"].get<double>(), -2e-4) << r["delay"].dump();
+  }
+}
+
 // The reviewer's first finding: a 5 ms delay on data where another joint has Coulomb friction
 // the model lacks (10 % of its RMS torque) was missed (0.20 ± 0.52 ms) and `parameters` named:
 // the held-out test of the delay refitted the base parameters without the friction nuisance,
@@ -347,7 +365,9 @@ void expect_stick_slip(const std::filesystem::path& dir, int s, bool fs_too) {
     if (cause["effect"] == "stick_slip" && !cause.contains("superseded_by")) {
       std::cout << "  " << cause["params"].dump() << "\n";
       EXPECT_NEAR(cause["params"]["fc"].get<double>(), d.fc, 0.2 * d.fc);
-      if (fs_too) EXPECT_NEAR(cause["params"]["fs"].get<double>(), d.fs, 0.2 * d.fs);
+      if (fs_too) {
+        EXPECT_NEAR(cause["params"]["fs"].get<double>(), d.fs, 0.2 * d.fs);
+      }
     }
 }
 

@@ -197,6 +197,35 @@ double Diagnosis::refitted_damping(int joint, const Fit& f) const {
   return std::numeric_limits<double>::quiet_NaN();
 }
 
+// Friction: a stateful candidate's force (as fitted, amplitude +1) takes energy out on balance
+// over the fit split; every column of a static one opposes the motion wherever it acts
+// (checked unfiltered, as above).
+bool Diagnosis::dissipates(const Candidate& c) const {
+  const Eigen::Index N = fit_.N;
+  auto qd_of = [&](Eigen::Index o) { return fit_.split.X.col(fit_.cols->qd[static_cast<size_t>(out_joint_index_[static_cast<size_t>(o)])]); };
+  if (c.stateful) {
+    if (c.fit_cols.cols != 1) return false;
+    double power = 0;
+    for (size_t p = 0; p < c.fit_cols.parts.size(); ++p) power -= c.fit_cols.parts[p].col(0).dot(qd_of(c.fit_cols.active[p]));
+    return power < 0;
+  }
+  PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
+  const Eigen::MatrixXd C = columns(inst, fit_, false).dense();
+  for (Eigen::Index k = 0; k < C.cols(); ++k) {
+    bool acts = false;
+    for (Eigen::Index o = 0; o * N < C.rows(); ++o) {
+      const auto qd = qd_of(o);
+      for (Eigen::Index i = 0; i < N; ++i) {
+        const double power = -C(o * N + i, k) * qd[i];
+        if (power > 0) return false;
+        acts |= power < 0;
+      }
+    }
+    if (!acts) return false;
+  }
+  return C.cols() > 0;
+}
+
 std::string Diagnosis::injects_energy(const Candidate& c, const Eigen::VectorXd& theta, double damping) const {
   PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
   const BlockColumns cols = columns(inst, fit_, false);

@@ -101,6 +101,7 @@ struct DelayResult {
   double seconds = 0, stderr_ = std::numeric_limits<double>::infinity(), delta_bic = 0, range = 0;
   bool named = false;
   bool withheld = false;   // evidence and held-out gain pass, but the data cannot be trusted with it (raw differences)
+  bool corrected = false;  // not named (below the floor, or the hold of a held torque), but resolved and corrected
   std::string why;
   Eigen::VectorXd y0_fit, y0_test;   // the fit and test targets before the correction (baseline)
   // Each corrected split's torques, targets and residual of the other side of the correction
@@ -215,6 +216,7 @@ class Diagnosis {
   void forward_backward();
   void score_candidates(const Fit& current, const std::vector<int>& chosen, const std::set<int>& research, std::vector<int>& order);
   bool nests(int larger, int smaller) const;
+  bool dissipates(const Candidate& c) const;
   bool evidence_holds(int candidate, const Fit& smaller, const Fit& larger) const;
   bool cause_needed(size_t i, const std::vector<size_t>& set, bool base_free) const;
   void eliminate_backward(bool base_free = true);

@@ -136,14 +136,14 @@ void Diagnosis::forward_backward() {
     int accepted = -1;
     Fit next;
     Eigen::VectorXd next_test;
-    std::vector<int> replaced;   // chosen causes the accepted one nests
     for (size_t i = 0; i < order.size() && i < 6 && accepted < 0; ++i) {
       // A candidate that nests a chosen cause (asymmetric friction holds Coulomb's column) is
       // tried in its place: beside it, the shared direction splits between the two at the
       // rounding's whim, and a part that falls negative was refused as energy-feeding friction
       // (fc_pos -0.015 beside Coulomb 0.093, where the two sum to the hidden 0.084).
-      std::vector<int> trial, nested;
-      for (int k : chosen) (nests(order[i], k) ? nested : trial).push_back(k);
+      std::vector<int> trial;
+      for (int k : chosen)
+        if (!nests(order[i], k)) trial.push_back(k);
       trial.push_back(order[i]);
       Fit f = refit(trial, true);
       Eigen::Index off = f.coef.size() - cands_[static_cast<size_t>(order[i])].fit_cols.cols;
@@ -153,23 +153,19 @@ void Diagnosis::forward_backward() {
       const auto outs = outputs_of(order[i]);
       if (gains_on_test(rss_on(r_test, outs, test_.N), rss_on(rt, outs, test_.N), opt_.min_gain, rss_floor(test_.b))) {
         accepted = order[i];
-        replaced = std::move(nested);
         next = std::move(f);
         next_test = std::move(rt);
       }
     }
-    if (accepted >= 0) {
-      const int rival = stateful_rival(accepted, order, chosen, next, next_test);   // #22 (stateful_fit.cc)
-      if (rival != accepted) replaced.clear();   // fitted beside every chosen cause
-      accepted = rival;
-    }
+    if (accepted >= 0) accepted = stateful_rival(accepted, order, chosen, next, next_test);   // #22 (stateful_fit.cc)
     result_.timings.refits += since(t0);
     if (accepted < 0) break;
-    for (int k : replaced) {
-      chosen.erase(std::find(chosen.begin(), chosen.end(), k));
-      for (auto& cause : causes_)
-        if (cause.candidate == k) cause.superseded_by = cands_[static_cast<size_t>(accepted)].plugin->name;
-    }
+    for (size_t q = chosen.size(); q-- > 0;)
+      if (nests(accepted, chosen[q])) {
+        for (auto& cause : causes_)
+          if (cause.candidate == chosen[q]) cause.superseded_by = cands_[static_cast<size_t>(accepted)].plugin->name;
+        chosen.erase(chosen.begin() + static_cast<std::ptrdiff_t>(q));
+      }
     chosen.push_back(accepted);
     causes_.push_back({accepted, cands_[static_cast<size_t>(accepted)].delta_bic, ""});
     current = std::move(next);
@@ -184,9 +180,15 @@ void Diagnosis::forward_backward() {
 // Does candidate `larger` hold every column of `smaller` (same joint, `smaller`'s fitted
 // columns inside the span of `larger`'s to rounding)? Coulomb inside asymmetric friction or a
 // Stribeck curve.
+// A stateful friction (its simulated force dissipates on balance: LuGre, whose steady state is
+// a Stribeck curve) nests every static friction on its joint (Coulomb, Stribeck, asymmetric
+// friction, a band: all opposing the motion): beside one, it was named as a second friction
+// of the same joint (`coulomb` + `stick_slip` for a hidden Coulomb friction).
 bool Diagnosis::nests(int larger, int smaller) const {
   const Candidate &L = cands_[static_cast<size_t>(larger)], &S = cands_[static_cast<size_t>(smaller)];
-  if (L.joint != S.joint || L.stateful || S.stateful || L.fit_cols.cols < S.fit_cols.cols) return false;
+  if (L.joint != S.joint || S.stateful) return false;
+  if (L.stateful) return dissipates(L) && dissipates(S);
+  if (L.fit_cols.cols < S.fit_cols.cols) return false;
   const Eigen::MatrixXd A = L.fit_cols.dense(), B = S.fit_cols.dense();
   if (A.rows() != B.rows() || B.norm() == 0) return false;
   const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(A);

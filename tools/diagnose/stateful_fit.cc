@@ -391,7 +391,9 @@ int Diagnosis::stateful_rival(int accepted, const std::vector<int>& order, const
   for (int k : order) {
     const Candidate& c = cands_[static_cast<size_t>(k)];
     if (!c.stateful || c.joint != a.joint) continue;
-    std::vector<int> trial = chosen;
+    std::vector<int> trial;
+    for (int q : chosen)
+      if (!nests(k, q)) trial.push_back(q);
     trial.push_back(k);
     Fit f = refit(trial, true);
     if (!refused(k, f.coef.tail(c.fit_cols.cols)).empty() || !evidence_holds(k, before, f)) continue;
