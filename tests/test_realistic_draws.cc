@@ -139,6 +139,20 @@ std::vector<std::string> named_causes(const nlohmann::json& report) {
   return out;
 }
 
+// One draw of `set` diagnosed alone (the single-draw tests below): its report.
+nlohmann::json diagnose_draw(const Draw& d, int level, int index, bool lowpass, const std::filesystem::path& file) {
+  DiagnoseOptions opt;
+  opt.model = d.user_path;
+  opt.data = condition(measure(d, static_cast<size_t>(level), index), kLevels[static_cast<size_t>(level)], lowpass, file.string());
+  opt.rollouts = 0;
+  return diagnose(opt, "").report;
+}
+
+std::set<std::string> named_set(const nlohmann::json& report) {
+  const auto list = named_causes(report);
+  return {list.begin(), list.end()};
+}
+
 struct Outcome {
   std::string level, path, hidden, label, named;   // named: "nothing" or "a@j0+b@j1"
   std::set<std::string> named_set, expected;
@@ -284,8 +298,7 @@ TEST(RealisticDraws, StribeckIsSearchedInsideItsForm) {
     opt.data = condition(run, kLevels[0], lowpass, (dir / (lowpass ? "lowpass.h5" : "raw.h5")).string());
     opt.rollouts = 0;
     const auto r = diagnose(opt, "").report;
-    const auto list = named_causes(r);
-    EXPECT_EQ(std::set<std::string>(list.begin(), list.end()), d.expected) << (lowpass ? "low-pass: " : "raw differences: ") << r["causes"].dump(1);
+    EXPECT_EQ(named_set(r), d.expected) << (lowpass ? "low-pass: " : "raw differences: ") << r["causes"].dump(1);
     const auto& filter = r["parallel_filter"];
     EXPECT_EQ(filter["source"], lowpass ? "recorded" : "detected") << filter.dump();
     if (!lowpass) {
@@ -303,13 +316,8 @@ TEST(RealisticDraws, LuGreMustBeatTheBestStaticFrictionNotCoulombAlone) {
   const auto dir = test::temp_dir("realistic-rival");
   const Draw d = make_draw(1, 6, dir, 1);
   ASSERT_EQ(d.hidden, "stribeck");
-  DiagnoseOptions opt;
-  opt.model = d.user_path;
-  opt.data = condition(measure(d, 1, 6), kLevels[1], true, (dir / "d.h5").string());
-  opt.rollouts = 0;
-  const auto r = diagnose(opt, "").report;
-  const auto list = named_causes(r);
-  EXPECT_EQ(std::set<std::string>(list.begin(), list.end()), d.expected) << r["causes"].dump(1);
+  const auto r = diagnose_draw(d, 1, 6, true, dir / "d.h5");
+  EXPECT_EQ(named_set(r), d.expected) << r["causes"].dump(1);
 }
 
 // Set 2, level 0, draw 6: a ripple on j0 of a 5-joint chain through the 10 Hz import. The delay
@@ -322,13 +330,8 @@ TEST(RealisticDraws, ADelayThatIsAnotherEffectIsDropped) {
   const auto dir = test::temp_dir("realistic-delay");
   const Draw d = make_draw(0, 6, dir, 2);
   ASSERT_EQ(d.hidden, "ripple");
-  DiagnoseOptions opt;
-  opt.model = d.user_path;
-  opt.data = condition(measure(d, 0, 6), kLevels[0], true, (dir / "d.h5").string());
-  opt.rollouts = 0;
-  const auto r = diagnose(opt, "").report;
-  const auto list = named_causes(r);
-  EXPECT_EQ(std::set<std::string>(list.begin(), list.end()), d.expected) << r["causes"].dump(1);
+  const auto r = diagnose_draw(d, 0, 6, true, dir / "d.h5");
+  EXPECT_EQ(named_set(r), d.expected) << r["causes"].dump(1);
   EXPECT_FALSE(r["delay"]["named"].get<bool>()) << r["delay"].dump();
   EXPECT_NE(r["delay"]["why"].get<std::string>().find("explain them better"), std::string::npos) << r["delay"].dump();
 }
@@ -346,14 +349,8 @@ TEST(RealisticDraws, AsymmetricFrictionReplacesTheCoulombItHolds) {
   for (const auto& [level, index] : {std::pair{2, 4}, std::pair{1, 2}}) {
     const Draw d = make_draw(level, index, dir, 2);
     ASSERT_EQ(d.hidden, "asymmetric_friction");
-    DiagnoseOptions opt;
-    opt.model = d.user_path;
-    opt.data = condition(measure(d, static_cast<size_t>(level), index), kLevels[static_cast<size_t>(level)], true,
-                         (dir / ("d" + std::to_string(level) + ".h5")).string());
-    opt.rollouts = 0;
-    const auto r = diagnose(opt, "").report;
-    const auto list = named_causes(r);
-    EXPECT_EQ(std::set<std::string>(list.begin(), list.end()), d.expected) << "level " << level << ": " << r["causes"].dump(1);
+    const auto r = diagnose_draw(d, level, index, true, dir / ("d" + std::to_string(level) + ".h5"));
+    EXPECT_EQ(named_set(r), d.expected) << "level " << level << ": " << r["causes"].dump(1);
     bool superseded = false;
     for (const auto& cause : r["causes"])
       superseded |= cause["effect"] == "coulomb" && cause.value("superseded_by", "") == "asymmetric_friction";
