@@ -223,11 +223,13 @@ void Diagnosis::delay_decide(double d, const std::function<Eigen::VectorXd(doubl
     s.b = targets_at(s, 0);
     s.y0 = s.b - s.given;
   };
-  auto correct_all = [&] {
+  // cross_too: a record of another rate has a half tick of its own; the logger's offset
+  // (below) is corrected in the cross records of the fit split's rate only.
+  auto correct_all = [&](bool cross_too) {
     correct(fit_);
     correct(test_);
     for (auto& [file, s] : cross_)
-      if (uniform_step(s) > 0) correct(s);
+      if (const double hs = uniform_step(s); hs > 0 && (cross_too || std::fabs(hs - h) <= 0.01 * h)) correct(s);
   };
   delay_.named = passes;
   if (!delay_.named) {
@@ -253,14 +255,14 @@ void Diagnosis::delay_decide(double d, const std::function<Eigen::VectorXd(doubl
     }
     delay_.corrected = true;
     delay_.why += "; corrected in every split (torques resampled at t + " + fmt(d) + " s) before the causes were estimated";
-    correct_all();
+    correct_all(false);
     delay_.other.clear();   // a part of preparing the data, never undone
     return;
   }
   delay_.why = "torques resampled at t + " + fmt(d) + " s in every split before the other causes were estimated";
   delay_.y0_fit = fit_.y0;
   delay_.y0_test = test_.y0;
-  correct_all();
+  correct_all(true);
   delay_.note = "the torques lag the states by " + fmt(d) + " ± " + fmt(delay_.stderr_, 2) +
                 " s (cause `delay`): corrected in the data before the other causes were estimated; an MJCF cannot hold a "
                 "delay, so shift the torque log by " + fmt(-d) + " s (or fix the logger) before using extended.xml on it";
