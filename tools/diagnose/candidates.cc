@@ -199,10 +199,9 @@ double Diagnosis::refitted_damping(int joint, const Fit& f) const {
 
 // Friction of a level, not of a rate: a stateful candidate's force (as fitted, amplitude +1)
 // takes energy out on balance over the fit split; every column of a static one opposes the
-// motion wherever it acts (checked unfiltered, as above) and does not grow with speed - its
-// mean size over the fastest quarter of the rows it acts on is at most 1.5 times that over the
-// slowest quarter (Coulomb, Stribeck, a band; not viscous friction, which LuGre with sigma2 = 0
-// does not hold).
+// motion wherever it acts (checked unfiltered, as above) and is not a rate - proportional to
+// q̇ wherever it acts (Coulomb, Stribeck, a band; not viscous friction or asymmetric
+// friction's fv columns, which LuGre with sigma2 = 0 does not hold).
 bool Diagnosis::dissipates(const Candidate& c) const {
   const Eigen::Index N = fit_.N;
   auto qd_of = [&](Eigen::Index o) { return fit_.split.X.col(fit_.cols->qd[static_cast<size_t>(out_joint_index_[static_cast<size_t>(o)])]); };
@@ -215,21 +214,20 @@ bool Diagnosis::dissipates(const Candidate& c) const {
   PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
   const Eigen::MatrixXd C = columns(inst, fit_, false).dense();
   for (Eigen::Index k = 0; k < C.cols(); ++k) {
-    std::vector<std::pair<double, double>> acting;   // (|qd|, |column|) where the column acts
+    bool acts = false, rate = true;
+    double slope = 0;
     for (Eigen::Index o = 0; o * N < C.rows(); ++o) {
       const auto qd = qd_of(o);
       for (Eigen::Index i = 0; i < N; ++i) {
-        const double power = -C(o * N + i, k) * qd[i];
+        const double v = C(o * N + i, k), power = -v * qd[i];
         if (power > 0) return false;
-        if (power < 0) acting.emplace_back(std::fabs(qd[i]), std::fabs(C(o * N + i, k)));
+        if (power == 0) continue;
+        acts = true;
+        if (slope == 0) slope = v / qd[i];
+        rate &= std::fabs(v / qd[i] - slope) <= 1e-9 * std::fabs(slope);
       }
     }
-    if (acting.size() < 8) return false;
-    std::sort(acting.begin(), acting.end());
-    const size_t quarter = acting.size() / 4;
-    double slow = 0, fast = 0;
-    for (size_t i = 0; i < quarter; ++i) slow += acting[i].second, fast += acting[acting.size() - 1 - i].second;
-    if (fast > 1.5 * slow) return false;
+    if (!acts || rate) return false;
   }
   return C.cols() > 0;
 }
