@@ -161,6 +161,43 @@ BlockColumns Diagnosis::columns_of(const Candidate& c, const SplitData& s) const
   return columns(inst, s);
 }
 
+Eigen::Ref<const Eigen::VectorXd> Diagnosis::fit_qd(Eigen::Index output) const {
+  return fit_.split.X.col(fit_.cols->qd[static_cast<size_t>(out_joint_index_[static_cast<size_t>(output)])]);
+}
+
+// `col` (stacked over the outputs, fit split): C is the column in inverse dynamics (tau = ... -
+// force), so the force's power is -C qd.
+bool Diagnosis::opposes_motion(const Eigen::VectorXd& col) const {
+  const Eigen::Index N = fit_.N;
+  bool acts = false;
+  for (Eigen::Index o = 0; o * N < col.size(); ++o) {
+    const auto qd = fit_qd(o);
+    for (Eigen::Index i = 0; i < N; ++i) {
+      const double power = -col[o * N + i] * qd[i];
+      if (power > 0) return false;
+      acts |= power < 0;
+    }
+  }
+  return acts;
+}
+
+double Diagnosis::rate_of(const Eigen::VectorXd& col) const {
+  const Eigen::Index N = fit_.N;
+  double slope = 0;
+  for (Eigen::Index o = 0; o * N < col.size(); ++o) {
+    const auto qd = fit_qd(o);
+    for (Eigen::Index i = 0; i < N; ++i) {
+      const double v = col[o * N + i];
+      if (v == 0) continue;
+      if (std::abs(qd[i]) < 1e-12) return 0;
+      const double r = v / qd[i];
+      if (slope == 0) slope = r;
+      else if (std::abs(r - slope) > 1e-9 * std::abs(slope)) return 0;   // not proportional to q̇
+    }
+  }
+  return slope;
+}
+
 // A term whose force opposes the joint's motion at every row of the fit split (Coulomb, Stribeck,
 // viscous, one direction of asymmetric friction, a band) is friction: fitted with a negative
 // coefficient it would push the joint along its motion, feeding it energy, which no friction
@@ -174,19 +211,7 @@ BlockColumns Diagnosis::columns_of(const Candidate& c, const SplitData& s) const
 // joint's q̇ column is a base column too, and the fit splits the shared part between them).
 bool Diagnosis::within_damping(const Eigen::VectorXd& col, int joint, double coef, double damping) const {
   const mjModel* m = reg_->model();
-  const Eigen::Index N = fit_.N;
-  double slope = 0;
-  for (Eigen::Index o = 0; o * N < col.size(); ++o) {
-    const auto qd = fit_.split.X.col(fit_.cols->qd[static_cast<size_t>(out_joint_index_[static_cast<size_t>(o)])]);
-    for (Eigen::Index i = 0; i < N; ++i) {
-      const double v = col[o * N + i];
-      if (v == 0) continue;
-      if (std::abs(qd[i]) < 1e-12) return false;
-      const double r = v / qd[i];
-      if (slope == 0) slope = r;
-      else if (std::abs(r - slope) > 1e-9 * std::abs(slope)) return false;   // not proportional to q̇
-    }
-  }
+  const double slope = rate_of(col);
   return slope > 0 && (std::isfinite(damping) ? damping : m->dof_damping[m->jnt_dofadr[joint]]) + slope * coef >= 0;
 }
 
@@ -199,61 +224,31 @@ double Diagnosis::refitted_damping(int joint, const Fit& f) const {
 
 // Friction of a level, not of a rate: a stateful candidate's force (as fitted, amplitude +1)
 // takes energy out on balance over the fit split; every column of a static one opposes the
-// motion wherever it acts (checked unfiltered, as above) and is not a rate - proportional to
-// q̇ wherever it acts (Coulomb, Stribeck, a band; not viscous friction or asymmetric
-// friction's fv columns, which LuGre with sigma2 = 0 does not hold).
+// motion (checked unfiltered, as above) and none is a rate (Coulomb, Stribeck, a band; not
+// viscous friction or asymmetric friction's fv columns, which LuGre with sigma2 = 0 does not
+// hold).
 bool Diagnosis::dissipates(const Candidate& c) const {
-  const Eigen::Index N = fit_.N;
-  auto qd_of = [&](Eigen::Index o) { return fit_.split.X.col(fit_.cols->qd[static_cast<size_t>(out_joint_index_[static_cast<size_t>(o)])]); };
   if (c.stateful) {
     if (c.fit_cols.cols != 1) return false;
     double power = 0;
-    for (size_t p = 0; p < c.fit_cols.parts.size(); ++p) power -= c.fit_cols.parts[p].col(0).dot(qd_of(c.fit_cols.active[p]));
+    for (size_t p = 0; p < c.fit_cols.parts.size(); ++p) power -= c.fit_cols.parts[p].col(0).dot(fit_qd(c.fit_cols.active[p]));
     return power < 0;
   }
   PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
   const Eigen::MatrixXd C = columns(inst, fit_, false).dense();
-  for (Eigen::Index k = 0; k < C.cols(); ++k) {
-    bool acts = false, rate = true;
-    double slope = 0;
-    for (Eigen::Index o = 0; o * N < C.rows(); ++o) {
-      const auto qd = qd_of(o);
-      for (Eigen::Index i = 0; i < N; ++i) {
-        const double v = C(o * N + i, k), power = -v * qd[i];
-        if (power > 0) return false;
-        if (power == 0) continue;
-        acts = true;
-        if (slope == 0) slope = v / qd[i];
-        rate &= std::fabs(v / qd[i] - slope) <= 1e-9 * std::fabs(slope);
-      }
-    }
-    if (!acts || rate) return false;
-  }
+  for (Eigen::Index k = 0; k < C.cols(); ++k)
+    if (!opposes_motion(C.col(k)) || rate_of(C.col(k)) != 0) return false;
   return C.cols() > 0;
 }
 
 std::string Diagnosis::injects_energy(const Candidate& c, const Eigen::VectorXd& theta, double damping) const {
   PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
-  const BlockColumns cols = columns(inst, fit_, false);
-  const Eigen::MatrixXd C = cols.dense();
+  const Eigen::MatrixXd C = columns(inst, fit_, false).dense();
   const auto names = inst.param_names();
-  const Eigen::Index N = fit_.N;
-  for (Eigen::Index k = 0; k < theta.size() && k < C.cols(); ++k) {
-    if (theta[k] >= 0) continue;
-    bool opposes = true, acts = false;
-    for (Eigen::Index o = 0; o * N < C.rows() && opposes; ++o) {
-      const auto qd = fit_.split.X.col(fit_.cols->qd[static_cast<size_t>(out_joint_index_[static_cast<size_t>(o)])]);
-      for (Eigen::Index i = 0; i < N; ++i) {
-        // C is the column in inverse dynamics (tau = ... - force): the force's power is -C qd.
-        const double power = -C(o * N + i, k) * qd[i];
-        opposes &= power <= 0;
-        acts |= power < 0;
-      }
-    }
-    if (opposes && acts && !within_damping(C.col(k), c.joint, theta[k], damping))
+  for (Eigen::Index k = 0; k < theta.size() && k < C.cols(); ++k)
+    if (theta[k] < 0 && opposes_motion(C.col(k)) && !within_damping(C.col(k), c.joint, theta[k], damping))
       return names[static_cast<size_t>(k)] + " = " + fmt(theta[k]) + " < 0 on a term that opposes the motion at every sample: negative "
              "friction would feed the joint energy, not dissipate it";
-  }
   return "";
 }
 

@@ -217,19 +217,20 @@ void Diagnosis::delay_decide(double d, const std::function<Eigen::VectorXd(doubl
     notes_.push_back("the torques appear to lag the states by " + fmt(d) + " ± " + fmt(delay_.stderr_, 2) + " s, " + delay_.why);
     return;
   }
-  auto correct = [&](SplitData& s) {
-    delay_.other.push_back({&s, s.split.Y, s.b, s.y0});
-    s.split.Y = shifted_columns(s.split.Y, d, uniform_step(s));
-    s.b = targets_at(s, 0);
-    s.y0 = s.b - s.given;
-  };
-  // cross_too: a record of another rate has a half tick of its own; the logger's offset
-  // (below) is corrected in the cross records of the fit split's rate only.
-  auto correct_all = [&](bool cross_too) {
+  // A named delay is remembered (select() may give it up) and corrected in every cross record;
+  // the logger's offset (below) is part of preparing the data, corrected in the cross records
+  // of the fit split's rate only (another rate has a half tick of its own).
+  auto correct_all = [&](bool named) {
+    auto correct = [&](SplitData& s) {
+      if (named) delay_.other.push_back({&s, s.split.Y, s.b, s.y0});
+      s.split.Y = shifted_columns(s.split.Y, d, uniform_step(s));
+      s.b = targets_at(s, 0);
+      s.y0 = s.b - s.given;
+    };
     correct(fit_);
     correct(test_);
     for (auto& [file, s] : cross_)
-      if (const double hs = uniform_step(s); hs > 0 && (cross_too || std::fabs(hs - h) <= 0.01 * h)) correct(s);
+      if (const double hs = uniform_step(s); hs > 0 && (named || std::fabs(hs - h) <= 0.01 * h)) correct(s);
   };
   delay_.named = passes;
   if (!delay_.named) {
@@ -256,7 +257,6 @@ void Diagnosis::delay_decide(double d, const std::function<Eigen::VectorXd(doubl
     delay_.corrected = true;
     delay_.why += "; corrected in every split (torques resampled at t + " + fmt(d) + " s) before the causes were estimated";
     correct_all(false);
-    delay_.other.clear();   // a part of preparing the data, never undone
     return;
   }
   delay_.why = "torques resampled at t + " + fmt(d) + " s in every split before the other causes were estimated";

@@ -101,7 +101,7 @@ struct DelayResult {
   double seconds = 0, stderr_ = std::numeric_limits<double>::infinity(), delta_bic = 0, range = 0;
   bool named = false;
   bool withheld = false;   // evidence and held-out gain pass, but the data cannot be trusted with it (raw differences)
-  bool corrected = false;  // not named (below the floor, or the hold of a held torque), but resolved and corrected
+  bool corrected = false;  // not named (an offset of 0.2-1 ms, the logger's half tick), but resolved and corrected
   std::string why;
   Eigen::VectorXd y0_fit, y0_test;   // the fit and test targets before the correction (baseline)
   // Each corrected split's torques, targets and residual of the other side of the correction
@@ -203,6 +203,9 @@ class Diagnosis {
   static std::string outside_its_form(const Candidate& c, const Eigen::VectorXd& theta);
   std::string injects_energy(const Candidate& c, const Eigen::VectorXd& theta, double damping) const;
   bool within_damping(const Eigen::VectorXd& col, int joint, double coef, double damping) const;
+  Eigen::Ref<const Eigen::VectorXd> fit_qd(Eigen::Index output) const;   // the fit split's q̇ of an output's joint
+  bool opposes_motion(const Eigen::VectorXd& col) const;   // its force opposes q̇ at every row, and acts at one
+  double rate_of(const Eigen::VectorXd& col) const;        // s when col = s q̇ wherever it is nonzero, else 0
   // shape_search.cc
   double search_shape(Candidate& c, const Fit& current);
   // estimate.cc
@@ -216,6 +219,7 @@ class Diagnosis {
   void forward_backward();
   void score_candidates(const Fit& current, const std::vector<int>& chosen, const std::set<int>& research, std::vector<int>& order);
   bool nests(int larger, int smaller) const;
+  std::vector<int> in_place(int candidate, const std::vector<int>& chosen) const;
   bool dissipates(const Candidate& c) const;
   bool evidence_holds(int candidate, const Fit& smaller, const Fit& larger) const;
   bool cause_needed(size_t i, const std::vector<size_t>& set, bool base_free) const;

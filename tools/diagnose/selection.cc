@@ -70,8 +70,6 @@ void Diagnosis::score_candidates(const Fit& current, const std::vector<int>& cho
   });
 }
 
-// Forward: at each step the first of the best six candidates whose fitted parameters the
-// plugin accepts and which gains on the test split joins.
 // The delay was searched with only a constant and static friction beside the base parameters;
 // an effect the model lacks that is not of that kind (a ripple, a Stribeck curve) can be half
 // explained by a shift, and the causes chosen on the shifted data are then wrong. So when a
@@ -119,6 +117,8 @@ double Diagnosis::free_parameters(const std::vector<int>& causes, const Fit& f) 
   return k;
 }
 
+// Forward: at each step the first of the best six candidates whose fitted parameters the
+// plugin accepts and which gains on the test split joins; then backward elimination.
 void Diagnosis::forward_backward() {
   std::vector<int> chosen;
   std::set<int> research;   // joints whose candidates need a new shape search
@@ -141,10 +141,7 @@ void Diagnosis::forward_backward() {
       // tried in its place: beside it, the shared direction splits between the two at the
       // rounding's whim, and a part that falls negative was refused as energy-feeding friction
       // (fc_pos -0.015 beside Coulomb 0.093, where the two sum to the hidden 0.084).
-      std::vector<int> trial;
-      for (int k : chosen)
-        if (!nests(order[i], k)) trial.push_back(k);
-      trial.push_back(order[i]);
+      const std::vector<int> trial = in_place(order[i], chosen);
       Fit f = refit(trial, true);
       Eigen::Index off = f.coef.size() - cands_[static_cast<size_t>(order[i])].fit_cols.cols;
       if (!refused(order[i], f.coef.tail(f.coef.size() - off), refitted_damping(cands_[static_cast<size_t>(order[i])].joint, f)).empty()) continue;
@@ -177,13 +174,11 @@ void Diagnosis::forward_backward() {
   result_.timings.refits += since(t0);
 }
 
-// Does candidate `larger` hold every column of `smaller` (same joint, `smaller`'s fitted
-// columns inside the span of `larger`'s to rounding)? Coulomb inside asymmetric friction or a
-// Stribeck curve.
-// A stateful friction (its simulated force dissipates on balance: LuGre, whose steady state is
-// a Stribeck curve) nests every static friction on its joint (Coulomb, Stribeck, asymmetric
-// friction, a band: all opposing the motion): beside one, it was named as a second friction
-// of the same joint (`coulomb` + `stick_slip` for a hidden Coulomb friction).
+// Does candidate `larger` hold `smaller` (same joint)? A static one when `smaller`'s fitted
+// columns lie inside the span of its own to rounding (Coulomb inside asymmetric friction or a
+// Stribeck curve). A stateful friction (LuGre, whose steady state is a Stribeck curve) when
+// both are friction of a level (dissipates): beside one, it was named as a second friction of
+// the same joint (`coulomb` + `stick_slip` for a hidden Coulomb friction).
 bool Diagnosis::nests(int larger, int smaller) const {
   const Candidate &L = cands_[static_cast<size_t>(larger)], &S = cands_[static_cast<size_t>(smaller)];
   if (L.joint != S.joint || S.stateful) return false;
@@ -194,6 +189,15 @@ bool Diagnosis::nests(int larger, int smaller) const {
   const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(A);
   const Eigen::MatrixXd left = B - A * qr.solve(B);
   return left.norm() <= 1e-8 * B.norm();
+}
+
+// The causes a candidate is tried with: the chosen ones it does not nest, and itself.
+std::vector<int> Diagnosis::in_place(int candidate, const std::vector<int>& chosen) const {
+  std::vector<int> trial;
+  for (int k : chosen)
+    if (!nests(candidate, k)) trial.push_back(k);
+  trial.push_back(candidate);
+  return trial;
 }
 
 // A cause's evidence (Delta BIC) on the outputs it acts on, with the effective sample size of

@@ -378,10 +378,7 @@ int Diagnosis::stateful_rival(int accepted, const std::vector<int>& order, const
   for (int k : order) {
     const Candidate& c = cands_[static_cast<size_t>(k)];
     if (c.stateful || c.joint != a.joint || k == accepted) continue;
-    std::vector<int> trial;
-    for (int q : chosen)
-      if (!nests(k, q)) trial.push_back(q);
-    trial.push_back(k);
+    const std::vector<int> trial = in_place(k, chosen);
     const Fit f = refit(trial, true);
     if (!refused(k, f.coef.tail(c.fit_cols.cols), refitted_damping(c.joint, f)).empty() || !evidence_holds(k, before, f)) continue;
     bar = std::min(bar, rss_on(residual_on(test_, trial, true, f), outs, test_.N));
@@ -391,10 +388,7 @@ int Diagnosis::stateful_rival(int accepted, const std::vector<int>& order, const
   for (int k : order) {
     const Candidate& c = cands_[static_cast<size_t>(k)];
     if (!c.stateful || c.joint != a.joint) continue;
-    std::vector<int> trial;
-    for (int q : chosen)
-      if (!nests(k, q)) trial.push_back(q);
-    trial.push_back(k);
+    const std::vector<int> trial = in_place(k, chosen);
     Fit f = refit(trial, true);
     if (!refused(k, f.coef.tail(c.fit_cols.cols)).empty() || !evidence_holds(k, before, f)) continue;
     Eigen::VectorXd rt = residual_on(test_, trial, true, f);
