@@ -56,6 +56,7 @@ struct Measurement {
   int bits = 18;
   int delay_samples = 0;
   double lowpass_hz = 10;
+  double f_high = 0;   // the excitation's top frequency [Hz] (0: the default band)
   // A torque outside the plugin vocabulary, added to the logged torque of joint `extra_joint`
   // as a function of its true position and velocity: a robot with that force needs exactly
   // this much more torque along the motion it made (inverse dynamics is additive).
@@ -71,6 +72,7 @@ std::string measured(const Case& c, const std::string& path, unsigned seed, cons
   o.encoder_bits = m.bits;
   o.seed = seed;
   o.excitation.seed = seed + 17;
+  if (m.f_high > 0) o.excitation.f_high = m.f_high, o.excitation.f_low = std::min(o.excitation.f_low, 0.5 * m.f_high);
   MeasuredRun run = simulate_measured(c.truth, o);
   if (m.extra && m.extra_joint >= 0)
     for (Eigen::Index i = 0; i < run.tau.rows(); ++i)   // no jitter: sample i is tick i
@@ -353,20 +355,35 @@ TEST(DiagnoseBeyond, DelayIsFoundBesideStaticFriction) {
   }
 }
 
-// LuGre draw s of make_draw's family: `stick_slip` named on its joint, fc within 20 % (and fs,
-// when fs_too).
-void expect_stick_slip(const std::filesystem::path& dir, int s, bool fs_too) {
-  const Draw d = make_draw(dir, "lugre", s, 0, Measurement{});
+// What a LuGre draw's report must say of its break-away force fs.
+enum class BreakAway {
+  within_20_percent,       // the log holds break-away: fs within 20 % and determined
+  within_20_or_said_free,  // fs within 20 %, or reported not identifiable
+};
+
+// LuGre draw s of make_draw's family, its excitation's top frequency f_high (0: the default
+// band, 0.1-1 Hz): `stick_slip` named on its joint, fc within 20 %, fs as `fs` says.
+void expect_stick_slip(const std::filesystem::path& dir, int s, double f_high, BreakAway fs) {
+  Measurement m;
+  m.f_high = f_high;
+  const Draw d = make_draw(dir, "lugre", s, 0, m);
   const auto r = run_draw(dir, d, s);
   const auto causes = named(r);
   std::cout << d.what << " on j" << d.joint << ": named " << joined(causes) << "\n";
   ASSERT_NE(std::find(causes.begin(), causes.end(), "stick_slip@j" + std::to_string(d.joint)), causes.end()) << joined(causes);
   for (const auto& cause : r["causes"])
     if (cause["effect"] == "stick_slip" && !cause.contains("superseded_by")) {
-      std::cout << "  " << cause["params"].dump() << "\n";
+      const auto& free = cause["not_identifiable"];
+      const bool said_free = std::find(free.begin(), free.end(), "fs") != free.end();
+      const double fs_error = std::fabs(cause["params"]["fs"].get<double>() - d.fs) / d.fs;
+      std::cout << "  " << cause["params"].dump() << "\n  not identifiable " << free.dump() << "\n";
       EXPECT_NEAR(cause["params"]["fc"].get<double>(), d.fc, 0.2 * d.fc);
-      if (fs_too) {
-        EXPECT_NEAR(cause["params"]["fs"].get<double>(), d.fs, 0.2 * d.fs);
+      if (fs == BreakAway::within_20_percent) {
+        EXPECT_LE(fs_error, 0.2);
+        EXPECT_FALSE(said_free) << free.dump();
+      }
+      if (fs == BreakAway::within_20_or_said_free) {
+        EXPECT_TRUE(fs_error <= 0.2 || said_free) << "fs off by " << fs_error;
       }
     }
 }
@@ -374,20 +391,52 @@ void expect_stick_slip(const std::filesystem::path& dir, int s, bool fs_too) {
 // LuGre on a random joint of a random spatial 3-joint chain, random levels (fc 6-15 % of the
 // joint's RMS torque, fs 1.2-2 fc, vs 0.03-0.23 rad/s, pre-sliding 1-3 mrad), positions only,
 // 1 % torque noise, 18-bit encoders, derivatives through the usual 10 Hz low-pass: `stick_slip`
-// on that joint with fc and fs within 20 %. Draw 3 was `coulomb` before the stateful fit
-// started from the static fits and was compared with them held out.
+// on that joint with fc within 20 %. Draw 3 was `coulomb` before the stateful fit started from
+// the static fits and was compared with them held out. At the default excitation (0.1-1 Hz)
+// the reversals are fast, and whether the bristles climb the Stribeck hump before the joint
+// slips depends on the draw: fs within 20 % or reported not identifiable.
 TEST(DiagnoseBeyond, LuGreIsNamedOnRealisticDataAgainstTheStaticCandidates) {
   const auto dir = test::temp_dir("lugre10");
-  for (int s : {3, 0}) expect_stick_slip(dir, s, true);
+  for (int s : {3, 0}) expect_stick_slip(dir, s, 0, BreakAway::within_20_or_said_free);
 }
 
-// Draws 2 and 6 of the same family were named `coulomb` until the stateful fit polished from a
-// coarse grid over its shape keys too (grid_start): now `stick_slip` on the right joint with
-// fc within 20 %. Their fs stays 42 and 27 % low, with vs at 0.5 and 1.3 rad/s (truth 0.04,
-// 0.08): through the 10 Hz low-pass that fits the fit split better than the true curve.
-TEST(DiagnoseBeyond, LuGreOfSmallBreakAwayIsNotCoulomb) {
+// A friction experiment: the same draws excited at 0.05-0.3 Hz, slow reversals along which the
+// friction climbs to its break-away force (a reversal at deceleration a climbs it when a is
+// below about sigma0 vs^2 / fs): fc and fs within 20 %, fs determined. At the default band
+// these draws' fs came out 42, 34 and 27 % low, the friction of the true curve simulated along
+// draw 6's log peaking at 0.61 for fs 0.76. Draw 6 was `coulomb` until the bristles started a
+// split at their steady state: from rest, a split that began in motion opened with a transient
+// of sigma1 v (-6 N m against a friction of 0.56), and LuGre lost the held-out test.
+TEST(DiagnoseBeyond, LuGreOnAFrictionExperimentIsNamedWithItsBreakAway) {
+  const auto dir = test::temp_dir("lugre_slow");
+  for (int s : {2, 4, 6}) expect_stick_slip(dir, s, 0.3, BreakAway::within_20_percent);
+}
+
+// Draws 2 and 6 at the default band: their logs hold no break-away and the fit no LuGre shape.
+// Fits with fs 0.058 and 0.0577 (draw 2, truth 0.100) or 0.556 and 21 (draw 6, truth 0.763)
+// were about equally good, vs ran to the top of its range on draw 6, and `stick_slip` had been
+// named with fs 42 and 27 % low, its errors saying determined (they were `coulomb` before the
+// stateful fit polished from a grid, grid_start, too). Now: the static friction of its level,
+// Coulomb's fc within 20 % of LuGre's, and `stick_slip` on that joint in `not_tried` with why.
+TEST(DiagnoseBeyond, LuGreWhoseLogShowsNoShapeIsItsStaticFriction) {
   const auto dir = test::temp_dir("lugre26");
-  for (int s : {2, 6}) expect_stick_slip(dir, s, false);
+  for (int s : {2, 6}) {
+    const Draw d = make_draw(dir, "lugre", s, 0, Measurement{});
+    const auto r = run_draw(dir, d, s);
+    const std::string joint = "j" + std::to_string(d.joint);
+    std::cout << d.what << " on " << joint << ": named " << joined(named(r)) << "\n  not tried " << r["not_tried"].dump() << "\n";
+    bool coulomb = false, said = false;
+    for (const auto& cause : r["causes"])
+      if (!cause.contains("superseded_by") && cause["effect"] == "coulomb" && cause["joints"][0] == joint) {
+        coulomb = true;
+        EXPECT_NEAR(cause["params"][joint + ".fc"].get<double>(), d.fc, 0.2 * d.fc);
+      }
+    for (const auto& n : r["not_tried"])
+      said = said || (n["effect"] == "stick_slip" && n.value("joint", "") == joint &&
+                      n["reason"].get<std::string>().find("a static friction") != std::string::npos);
+    EXPECT_TRUE(coulomb) << joined(named(r));
+    EXPECT_TRUE(said) << r["not_tried"].dump();
+  }
 }
 
 // A torque held over each sample leads the states by half a sample: 2.5 ms at 200 Hz, above
@@ -460,6 +509,7 @@ TEST(DiagnoseBeyond, DISABLED_SeedTable) {
   for (int s = first; s < first + seeds; ++s) {
     Measurement m = noise_level(std::stod(env("SPML_BEYOND_NOISE", "0.01")), std::stoi(env("SPML_BEYOND_BITS", "18")));
     m.lowpass_hz = std::stod(env("SPML_BEYOND_LOWPASS", "10"));
+    m.f_high = std::stod(env("SPML_BEYOND_FHIGH", "0"));
     const Draw d = make_draw(dir, kind, s, std::stod(env("SPML_BEYOND_DELAY_MS", "5")), m);
     const auto r = run_draw(dir, d, s);
     std::cout << "TABLE " << kind << " seed " << s << " joint j" << d.joint << " other j" << d.other << " (" << d.what << "): delay "
@@ -467,7 +517,8 @@ TEST(DiagnoseBeyond, DISABLED_SeedTable) {
               << r["delay"]["named"] << "; causes " << joined(named(r)) << "\n";
     for (const auto& cause : r["causes"])
       std::cout << "   cause " << cause["effect"] << " " << cause["joints"].dump() << " " << cause.value("params", nlohmann::json()).dump()
-                << (cause.contains("superseded_by") ? " superseded" : "") << "\n";
+                << (cause.contains("superseded_by") ? " superseded" : "")
+                << (cause.contains("not_identifiable") ? " not identifiable " + cause["not_identifiable"].dump() : "") << "\n";
     for (const auto& u : r["unexplained"])
       std::cout << "   unexplained " << u["joint"] << " top " << u["inputs"][0] << " share " << u["share"] << " explained_rmse "
                 << std::sqrt(std::pow(u["rmse_test"].get<double>(), 2) - std::pow(u["rmse_test_with_gp"].get<double>(), 2)) << " noise_rmse " << u["noise_rmse"] << "\n";

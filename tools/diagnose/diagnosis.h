@@ -84,7 +84,7 @@ struct Candidate {
   // fit_cols is its simulated force (one column).
   bool stateful = false;
   std::vector<double> stateful_se;            // per shape key, absolute
-  std::vector<std::string> not_identifiable;  // keys with a relative standard error above 50 %
+  std::vector<std::string> not_identifiable;  // keys with a relative standard error above 50 %, or that far apart between equally good fits
 };
 
 bool is_stateful(const spml_force_plugin& p);   // #22: advance/reset and no regressor
@@ -267,7 +267,9 @@ class Diagnosis {
   double scan_shape_keys(const Candidate& c, const Fit& current, const std::vector<bool>& level, const std::vector<double>& lb,
                          const std::vector<double>& ub, std::vector<double>& x) const;
   void polish_stateful(const Candidate& c, const Fit& current, const std::vector<double>& lb, const std::vector<double>& ub,
-                       std::vector<double>& x) const;
+                       std::vector<double>& x, int fixed = -1, int evals_per_key = 0) const;   // 0: the full polish
+  std::vector<std::string> profile_stateful(const Candidate& c, const Fit& current, const std::vector<bool>& level,
+                                            const std::vector<double>& lb, const std::vector<double>& ub, const std::vector<double>& x) const;
   std::vector<double> grid_start(const Candidate& c, const Fit& current, const std::vector<bool>& level, const std::vector<double>& lb,
                                  const std::vector<double>& ub, const std::vector<double>& x) const;
   int stateful_rival(int accepted, const std::vector<int>& order, const std::vector<int>& chosen, Fit& next, Eigen::VectorXd& next_test);
