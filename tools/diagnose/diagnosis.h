@@ -85,6 +85,7 @@ struct Candidate {
   bool stateful = false;
   std::vector<double> stateful_se;            // per shape key, absolute
   std::vector<std::string> not_identifiable;  // keys with a relative standard error above 50 %, or that far apart between equally good fits
+  bool profiled = false;                      // shape_holds ran
 };
 
 bool is_stateful(const spml_force_plugin& p);   // #22: advance/reset and no regressor
@@ -274,6 +275,8 @@ class Diagnosis {
                                  const std::vector<double>& ub, const std::vector<double>& x) const;
   int stateful_rival(int accepted, const std::vector<int>& order, const std::vector<int>& chosen, Fit& next, Eigen::VectorXd& next_test);
   void settle_levels(Candidate& c, const Fit& current, const std::vector<bool>& level, std::vector<double>& x);
+  bool shaped(const Candidate& c) const;
+  bool shape_holds(int k, const Fit& current);
   void stateful_errors(Candidate& c, const Fit& current, const std::vector<double>& x);
   void stateful_report(const Candidate& c, double amplitude, nlohmann::json& params, nlohmann::json& se, nlohmann::json& j) const;
   Eigen::VectorXd written_stateful(const SplitData& s, const mjModel* ext) const;
