@@ -1,7 +1,8 @@
 // Issue #22 item 1, stateful effects fitted by simulation. A force plugin with internal state
 // (`advance`/`reset`, no regressor: LuGre `stick_slip`) is not a regressor of the measured
 // state, but its state follows from the measured motion: integrated along the log (the
-// plugin's own `advance` between the rows' time stamps, from `reset`), it gives a force
+// plugin's own `advance` between the rows' time stamps, from the steady state of each record's
+// first row), it gives a force
 // column for any parameter set. Its parameters are fitted by output error - the residual of
 // the current fit, with the base parameters and the causes already chosen projected out
 // (variable projection), minus the simulated force - over the logarithms of every numeric key
@@ -11,15 +12,16 @@
 // evidence counts every fitted key, so it is compared with the static candidates on the same
 // held-out test. Standard errors: Gauss-Newton in the logarithms, autocorrelation-inflated;
 // a key whose relative standard error exceeds 50 % is reported not identifiable (a LuGre
-// bristle stiffness sigma0 when the data hold no resolved pre-sliding).
+// bristle stiffness sigma0 when the data hold no resolved pre-sliding), and so is one that
+// fits the data do not tell apart leave 50 % apart (profile_stateful, for a candidate about to
+// join). A fit whose shape keys are none determined, or one at the end of its range, is its
+// levels: a static friction, not this effect.
 #include <nlopt.hpp>
 
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
 #include <map>
-#include <cstdio>
-#include <cstdlib>
 
 #include "diagnosis.h"
 #include "spml/parse.h"
@@ -63,8 +65,9 @@ void Diagnosis::add_stateful_candidates(const spml_force_plugin& p) {
   for (size_t i = first; i < cands_.size(); ++i) cands_[i].stateful = true;
 }
 
-// The plugin's force integrated along a split: reset, then per row its force at the measured
-// state and an advance to the next row's time stamp. Inverse-dynamics sign, parallel filter.
+// The plugin's force integrated along a split: at the start of each record, reset and warmed
+// up (below), then per row its force at the measured state and an advance to the next row's
+// time stamp. Inverse-dynamics sign, parallel filter.
 BlockColumns Diagnosis::simulated_columns(const PluginInstance& inst, const SplitData& s) const {
   const mjModel* m = reg_->model();
   // One mjData for every simulation (making one costs more than a whole pass along a split).
@@ -77,19 +80,22 @@ BlockColumns Diagnosis::simulated_columns(const PluginInstance& inst, const Spli
   const int O = static_cast<int>(s.split.Y.cols());
   BlockBuilder C(s.N, O, 1);
   std::vector<mjtNum> qfrc(static_cast<size_t>(m->nv));
-  if (inst.plugin().reset) inst.plugin().reset(inst.state());   // a declared plugin may be stateless (load.cc)
-  // The state at the first row is not in the log: it is taken as the steady state of the first
-  // row's motion, the plugin advanced for kWarmUp with that state held. From the reset state
-  // instead, a split that starts in motion began with a transient of the bristles' damping
-  // (sigma1 v, -6 N m where the whole friction was 0.56), and LuGre lost a held-out test it won.
-  if (inst.plugin().advance && s.N > 0) {
+  // The state at a record's first row is not in the log: it is taken as the steady state of
+  // that row's motion, the plugin advanced for kWarmUp with the row's state held (for a state
+  // the motion drives and that forgets, as LuGre's bristles). From the reset state instead, a
+  // split that starts in motion began with a transient of the bristles' damping (sigma1 v,
+  // -6 N m where the whole friction was 0.56), and LuGre lost a held-out test it won.
+  auto start_record = [&](Eigen::Index i) {
+    if (inst.plugin().reset) inst.plugin().reset(inst.state());   // a declared plugin may be stateless (load.cc)
+    if (!inst.plugin().advance) return;
     for (int j = 0; j < m->njnt; ++j) {
-      d->qpos[m->jnt_qposadr[j]] = s.split.X(0, s.cols->q[static_cast<size_t>(j)]);
-      d->qvel[m->jnt_dofadr[j]] = s.split.X(0, s.cols->qd[static_cast<size_t>(j)]);
+      d->qpos[m->jnt_qposadr[j]] = s.split.X(i, s.cols->q[static_cast<size_t>(j)]);
+      d->qvel[m->jnt_dofadr[j]] = s.split.X(i, s.cols->qd[static_cast<size_t>(j)]);
     }
     for (int k = 0; k < kWarmUpSteps; ++k) inst.plugin().advance(inst.state(), m, d.get(), kWarmUp / kWarmUpSteps);
-  }
+  };
   for (Eigen::Index i = 0; i < s.N; ++i) {
+    if (i == 0 || std::find(s.runs.begin(), s.runs.end(), i) != s.runs.end()) start_record(i);   // several --data: no state across a junction
     for (int j = 0; j < m->njnt; ++j) {
       d->qpos[m->jnt_qposadr[j]] = s.split.X(i, s.cols->q[static_cast<size_t>(j)]);
       d->qvel[m->jnt_dofadr[j]] = s.split.X(i, s.cols->qd[static_cast<size_t>(j)]);
@@ -355,6 +361,11 @@ std::vector<std::string> Diagnosis::profile_stateful(const Candidate& c, const F
     if (value < lb[k] || value > ub[k]) return;
     std::vector<double> p = x;
     p[k] = value;
+    // A level moved alone may leave what the plugin accepts (LuGre's fc <= fs: fs halved below
+    // fc), and the polish cannot start there: the other levels move by the same factor.
+    if (level[k] && !std::isfinite(stateful_drop(c, current, p)))
+      for (size_t m = 0; m < ns; ++m)
+        if (m != k && level[m]) p[m] = std::clamp(p[m] + value - x[k], lb[m], ub[m]);
     polish_stateful(c, current, lb, ub, p, static_cast<int>(k), kProfileEvalsPerKey);
     points.push_back(std::move(p));
   };
@@ -445,7 +456,9 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
   std::string at_end;
   for (size_t k = 0; k < ns; ++k) {
     const auto [lo, hi] = c.shape_range[k];
-    if (!level[k] && (c.shape_values[k] <= lo * (1 + 1e-6) || c.shape_values[k] >= hi * (1 - 1e-6)))
+    // Within the polish's tolerance (1e-4 in the logarithm) of an end, with a margin.
+    const double v = std::log(std::max(c.shape_values[k], 1e-300));
+    if (!level[k] && (v <= std::log(std::max(lo, 1e-12)) + 1e-3 || v >= std::log(std::max(hi, 2e-12)) - 1e-3))
       at_end += std::string(at_end.empty() ? "" : ", ") + c.shape[k]->key;
   }
   if (!at_end.empty() || !shaped(c)) {
