@@ -270,14 +270,13 @@ class Diagnosis {
   void polish_stateful(const Candidate& c, const Fit& current, const std::vector<double>& lb, const std::vector<double>& ub,
                        std::vector<double>& x, int fixed = -1, int evals_per_key = 0) const;   // 0: the full polish
   std::vector<std::string> profile_stateful(const Candidate& c, const Fit& current, const std::vector<bool>& level,
-                                            const std::vector<double>& lb, const std::vector<double>& ub, const std::vector<double>& x,
-                                            std::vector<std::vector<double>>* equal = nullptr) const;
+                                            const std::vector<double>& lb, const std::vector<double>& ub, const std::vector<double>& x) const;
   std::vector<double> grid_start(const Candidate& c, const Fit& current, const std::vector<bool>& level, const std::vector<double>& lb,
                                  const std::vector<double>& ub, const std::vector<double>& x) const;
   int stateful_rival(int accepted, const std::vector<int>& order, const std::vector<int>& chosen, Fit& next, Eigen::VectorXd& next_test);
   void settle_levels(Candidate& c, const Fit& current, const std::vector<bool>& level, std::vector<double>& x);
   bool shaped(const Candidate& c) const;
-  bool shape_holds(int k, const Fit& current, const std::vector<int>& chosen, bool* changed = nullptr);
+  bool shape_holds(int k, const Fit& current);
   void stateful_errors(Candidate& c, const Fit& current, const std::vector<double>& x);
   void stateful_report(const Candidate& c, double amplitude, nlohmann::json& params, nlohmann::json& se, nlohmann::json& j) const;
   Eigen::VectorXd written_stateful(const SplitData& s, const mjModel* ext) const;

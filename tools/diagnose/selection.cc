@@ -148,17 +148,8 @@ void Diagnosis::forward_backward() {
       if (!evidence_holds(order[i], current, f)) continue;
       Eigen::VectorXd rt = residual_on(test_, trial, true, f);
       const auto outs = outputs_of(order[i]);
-      if (!gains_on_test(rss_on(r_test, outs, test_.N), rss_on(rt, outs, test_.N), opt_.min_gain, rss_floor(test_.b))) continue;
-      if (bool changed = false; cands_[static_cast<size_t>(order[i])].stateful) {
-        if (!shape_holds(order[i], current, chosen, &changed)) continue;
-        if (changed) {   // the tie broken by the model as given (stateful_fit.cc): fitted again with its new force
-          f = refit(trial, true);
-          if (!refused(order[i], f.coef.tail(cands_[static_cast<size_t>(order[i])].fit_cols.cols)).empty() || !evidence_holds(order[i], current, f)) continue;
-          rt = residual_on(test_, trial, true, f);
-          if (!gains_on_test(rss_on(r_test, outs, test_.N), rss_on(rt, outs, test_.N), opt_.min_gain, rss_floor(test_.b))) continue;
-        }
-      }
-      {
+      if (gains_on_test(rss_on(r_test, outs, test_.N), rss_on(rt, outs, test_.N), opt_.min_gain, rss_floor(test_.b)) &&
+          (!cands_[static_cast<size_t>(order[i])].stateful || shape_holds(order[i], current))) {
         accepted = order[i];
         next = std::move(f);
         next_test = std::move(rt);

@@ -354,7 +354,7 @@ void Diagnosis::polish_stateful(const Candidate& c, const Fit& current, const st
 // side of its hump, was small.
 std::vector<std::string> Diagnosis::profile_stateful(const Candidate& c, const Fit& current, const std::vector<bool>& level,
                                                      const std::vector<double>& lb, const std::vector<double>& ub,
-                                                     const std::vector<double>& x, std::vector<std::vector<double>>* equal) const {
+                                                     const std::vector<double>& x) const {
   const size_t ns = x.size();
   std::vector<std::vector<double>> points;
   auto add = [&](size_t k, double value) {
@@ -394,7 +394,6 @@ std::vector<std::string> Diagnosis::profile_stateful(const Candidate& c, const F
   std::vector<bool> loose(ns, false);
   for (const auto& p : points) {
     if (!(n_eff * std::log(std::max(joint_rss(p), rss_best) / rss_best) <= kProfileChi2)) continue;
-    if (equal) equal->push_back(p);
     for (size_t k = 0; k < ns; ++k) loose[k] = loose[k] || std::fabs(std::exp(p[k] - x[k]) - 1) >= kNotIdentifiable * (1 - 1e-9);
   }
   for (size_t k = 0; k < ns; ++k)
@@ -492,9 +491,8 @@ bool Diagnosis::shaped(const Candidate& c) const {
 // equally good fits leave apart join its not_identifiable, and when no shape key is left
 // determined it is not that effect (settle_levels' rule). Only then: profiling every joint's
 // fit tripled the arm's diagnose and the undecimated Panda's, where LuGre joins nowhere.
-bool Diagnosis::shape_holds(int k, const Fit& current, const std::vector<int>& chosen, bool* changed) {
+bool Diagnosis::shape_holds(int k, const Fit& current) {
   Candidate& c = cands_[static_cast<size_t>(k)];
-  if (changed) *changed = false;
   if (c.profiled) return !c.skipped;
   c.profiled = true;
   const size_t ns = c.shape.size();
@@ -506,37 +504,8 @@ bool Diagnosis::shape_holds(int k, const Fit& current, const std::vector<int>& c
     ub[k2] = std::log(std::max(c.shape_range[k2].second, 2e-12));
     x[k2] = std::clamp(std::log(std::max(c.shape_values[k2], 1e-300)), lb[k2], ub[k2]);   // a level declared 0 sits at its floor
   }
-  std::vector<std::vector<double>> equal;
-  const std::vector<std::string> spread = profile_stateful(c, current, level, lb, ub, x, &equal);
-  auto merge = [&] {
-    for (const auto& key : spread)
-      if (std::find(c.not_identifiable.begin(), c.not_identifiable.end(), key) == c.not_identifiable.end()) c.not_identifiable.push_back(key);
-  };
-  merge();
-  // Where the data leave a shape key open, the tie among the equally good fits is broken by
-  // the model as given: the fit that explains most with the MJCF's base parameters held. On
-  // slow logs the bristle damping sigma1 is such a key, and the one the free fit happened on
-  // traded with the joint's damping (sigma1 3.0 for 0.81, damping 0.24 for 0.5: `parameters`).
-  bool open_shape = false;
-  for (size_t k2 = 0; k2 < ns; ++k2)
-    open_shape = open_shape || (!level[k2] && std::find(spread.begin(), spread.end(), c.shape[k2]->key) != spread.end());
-  if (open_shape && !equal.empty()) {
-    const Fit given = refit(chosen, false);
-    double best = stateful_drop(c, given, x);
-    const std::vector<double>* pick = nullptr;
-    for (const auto& p : equal)
-      if (const double g = stateful_drop(c, given, p); g > best) best = g, pick = &p;
-    if (pick) {
-      for (size_t k2 = 0; k2 < ns; ++k2)
-        if (c.shape_values[k2] != 0 || !level[k2]) c.shape_values[k2] = std::exp((*pick)[k2]);   // a level declared 0 stays 0
-      PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
-      c.fit_cols = simulated_columns(inst, fit_);
-      c.gain = gain_of(c.fit_cols, current.Q(), current.residual);
-      stateful_errors(c, current, *pick);
-      merge();
-      if (changed) *changed = true;
-    }
-  }
+  for (const auto& key : profile_stateful(c, current, level, lb, ub, x))
+    if (std::find(c.not_identifiable.begin(), c.not_identifiable.end(), key) == c.not_identifiable.end()) c.not_identifiable.push_back(key);
   if (shaped(c)) return true;
   c.skipped = true;
   not_tried_.push_back({{"effect", c.plugin->name}, {"joint", c.joint_name},
@@ -582,16 +551,8 @@ int Diagnosis::stateful_rival(int accepted, const std::vector<int>& order, const
     Fit f = refit(trial, true);
     if (!refused(k, f.coef.tail(c.fit_cols.cols)).empty() || !evidence_holds(k, before, f)) continue;
     Eigen::VectorXd rt = residual_on(test_, trial, true, f);
-    double rss = rss_on(rt, outs, test_.N);
-    bool changed = false;
-    if (!gains_on_test(best, rss, opt_.min_gain, rss_floor(test_.b)) || !shape_holds(k, before, chosen, &changed)) continue;
-    if (changed) {   // the tie broken: fitted again with its new force
-      f = refit(trial, true);
-      if (!refused(k, f.coef.tail(c.fit_cols.cols)).empty() || !evidence_holds(k, before, f)) continue;
-      rt = residual_on(test_, trial, true, f);
-      rss = rss_on(rt, outs, test_.N);
-    }
-    if (gains_on_test(best, rss, opt_.min_gain, rss_floor(test_.b))) {
+    const double rss = rss_on(rt, outs, test_.N);
+    if (gains_on_test(best, rss, opt_.min_gain, rss_floor(test_.b)) && shape_holds(k, before)) {
       best = rss;
       out = k;
       next = std::move(f);
