@@ -98,6 +98,13 @@ inline std::string declaration_name(const Candidate& c) { return kDiagnosedPrefi
 inline constexpr double kMinDelayGain = 0.1;
 
 // #22: the offset between torques and states (delay.cc).
+// #22: the box a stateful candidate is searched in (logarithms of its keys), and which keys are
+// levels (stateful_fit.cc).
+struct StatefulSpace {
+  std::vector<double> lb, ub;
+  std::vector<bool> level;
+};
+
 struct DelayResult {
   double seconds = 0, stderr_ = std::numeric_limits<double>::infinity(), delta_bic = 0, range = 0;
   bool named = false;
@@ -276,6 +283,8 @@ class Diagnosis {
   int stateful_rival(int accepted, const std::vector<int>& order, const std::vector<int>& chosen, Fit& next, Eigen::VectorXd& next_test);
   void settle_levels(Candidate& c, const Fit& current, const std::vector<bool>& level, std::vector<double>& x);
   bool shaped(const Candidate& c) const;
+  bool is_level(const spml_shape_param* sp) const;
+  StatefulSpace stateful_space(const Candidate& c) const;
   bool shape_holds(int k, const Fit& current);
   void stateful_errors(Candidate& c, const Fit& current, const std::vector<double>& x);
   void stateful_report(const Candidate& c, double amplitude, nlohmann::json& params, nlohmann::json& se, nlohmann::json& j) const;

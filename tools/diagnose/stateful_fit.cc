@@ -43,6 +43,22 @@ constexpr double kProfileChi2 = 3.84;      // a profile point the data do not re
 
 bool is_stateful(const spml_force_plugin& p) { return !p.regressor && p.advance && p.reset; }
 
+// A level key (fc, fs, sigma2: no shape parameter of the plugin's own, ranged by the fit).
+bool Diagnosis::is_level(const spml_shape_param* sp) const {
+  return std::any_of(synthesized_.begin(), synthesized_.end(), [&](const spml_shape_param& s) { return &s == sp; });
+}
+
+// The box a stateful candidate is searched in: its keys' ranges in logarithms.
+StatefulSpace Diagnosis::stateful_space(const Candidate& c) const {
+  StatefulSpace b;
+  for (size_t k = 0; k < c.shape.size(); ++k) {
+    b.level.push_back(is_level(c.shape[k]));
+    b.lb.push_back(std::log(std::max(c.shape_range[k].first, 1e-12)));
+    b.ub.push_back(std::log(std::max(c.shape_range[k].second, 2e-12)));
+  }
+  return b;
+}
+
 // One candidate per moving joint; every required numeric key becomes a searched parameter
 // (the plugin's shape keys with their own ranges, the others as levels, ranged by the fit).
 void Diagnosis::add_stateful_candidates(const spml_force_plugin& p) {
@@ -85,20 +101,18 @@ BlockColumns Diagnosis::simulated_columns(const PluginInstance& inst, const Spli
   // the motion drives and that forgets, as LuGre's bristles). From the reset state instead, a
   // split that starts in motion began with a transient of the bristles' damping (sigma1 v,
   // -6 N m where the whole friction was 0.56), and LuGre lost a held-out test it won.
-  auto start_record = [&](Eigen::Index i) {
-    if (inst.plugin().reset) inst.plugin().reset(inst.state());   // a declared plugin may be stateless (load.cc)
-    if (!inst.plugin().advance) return;
+  auto set_state = [&](Eigen::Index i) {
     for (int j = 0; j < m->njnt; ++j) {
       d->qpos[m->jnt_qposadr[j]] = s.split.X(i, s.cols->q[static_cast<size_t>(j)]);
       d->qvel[m->jnt_dofadr[j]] = s.split.X(i, s.cols->qd[static_cast<size_t>(j)]);
     }
-    for (int k = 0; k < kWarmUpSteps; ++k) inst.plugin().advance(inst.state(), m, d.get(), kWarmUp / kWarmUpSteps);
   };
   for (Eigen::Index i = 0; i < s.N; ++i) {
-    if (i == 0 || std::find(s.runs.begin(), s.runs.end(), i) != s.runs.end()) start_record(i);   // several --data: no state across a junction
-    for (int j = 0; j < m->njnt; ++j) {
-      d->qpos[m->jnt_qposadr[j]] = s.split.X(i, s.cols->q[static_cast<size_t>(j)]);
-      d->qvel[m->jnt_dofadr[j]] = s.split.X(i, s.cols->qd[static_cast<size_t>(j)]);
+    set_state(i);
+    if (i == 0 || std::find(s.runs.begin(), s.runs.end(), i) != s.runs.end()) {   // several --data: no state across a junction
+      if (inst.plugin().reset) inst.plugin().reset(inst.state());   // a declared plugin may be stateless (load.cc)
+      if (inst.plugin().advance)
+        for (int k = 0; k < kWarmUpSteps; ++k) inst.plugin().advance(inst.state(), m, d.get(), kWarmUp / kWarmUpSteps);
     }
     std::fill(qfrc.begin(), qfrc.end(), 0.0);
     inst.plugin().compute(inst.state(), m, d.get(), qfrc.data());
@@ -200,15 +214,9 @@ double Diagnosis::scan_shape_keys(const Candidate& c, const Fit& current, const 
 void Diagnosis::fit_stateful(Candidate& c, const Fit& current) {
   if (fit_.split.t.size() != fit_.N) throw PluginError("no time stamps: a stateful effect cannot be integrated along the fit split");
   const size_t ns = c.shape.size();
-  std::vector<double> x(ns), lb(ns), ub(ns);
-  std::vector<bool> level(ns);
-  for (size_t k = 0; k < ns; ++k) {
-    level[k] = std::any_of(synthesized_.begin(), synthesized_.end(), [&](const spml_shape_param& sp) { return &sp == c.shape[k]; });
-    const auto [lo, hi] = c.shape_range[k];
-    lb[k] = std::log(std::max(lo, 1e-12));
-    ub[k] = std::log(std::max(hi, 2e-12));
-    x[k] = 0.5 * (lb[k] + ub[k]);
-  }
+  auto [lb, ub, level] = stateful_space(c);
+  std::vector<double> x(ns);
+  for (size_t k = 0; k < ns; ++k) x[k] = 0.5 * (lb[k] + ub[k]);
   // The common level of the non-shape keys: a scan from 1 % to 3x the residual's RMS on the joint.
   const int o = static_cast<int>(std::find(out_joint_index_.begin(), out_joint_index_.end(), c.joint) - out_joint_index_.begin());
   const double rms = std::sqrt(current.residual.segment(o * fit_.N, fit_.N).squaredNorm() / static_cast<double>(fit_.N));
@@ -454,12 +462,11 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
   // the reversals in place of the stick phases that the data's low-pass rounded off; another,
   // with sigma0 1.7e5 +- 4.7e5, vs 1.3 +- 1.0, sigma1 6.7 +- 3.7 and fs = fc + 3 %.
   std::string at_end;
+  const StatefulSpace box = stateful_space(c);
   for (size_t k = 0; k < ns; ++k) {
-    const auto [lo, hi] = c.shape_range[k];
     // Within the polish's tolerance (1e-4 in the logarithm) of an end, with a margin.
     const double v = std::log(std::max(c.shape_values[k], 1e-300));
-    if (!level[k] && (v <= std::log(std::max(lo, 1e-12)) + 1e-3 || v >= std::log(std::max(hi, 2e-12)) - 1e-3))
-      at_end += std::string(at_end.empty() ? "" : ", ") + c.shape[k]->key;
+    if (!level[k] && (v <= box.lb[k] + 1e-3 || v >= box.ub[k] - 1e-3)) at_end += std::string(at_end.empty() ? "" : ", ") + c.shape[k]->key;
   }
   if (!at_end.empty() || !shaped(c)) {
     c.skipped = true;
@@ -480,8 +487,7 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
 // Is one of the candidate's shape keys determined (not in not_identifiable)?
 bool Diagnosis::shaped(const Candidate& c) const {
   for (size_t k = 0; k < c.shape.size(); ++k) {
-    const bool is_level = std::any_of(synthesized_.begin(), synthesized_.end(), [&](const spml_shape_param& sp) { return &sp == c.shape[k]; });
-    if (!is_level && std::find(c.not_identifiable.begin(), c.not_identifiable.end(), c.shape[k]->key) == c.not_identifiable.end()) return true;
+    if (!is_level(c.shape[k]) && std::find(c.not_identifiable.begin(), c.not_identifiable.end(), c.shape[k]->key) == c.not_identifiable.end()) return true;
   }
   return false;
 }
@@ -495,15 +501,10 @@ bool Diagnosis::shape_holds(int k, const Fit& current) {
   Candidate& c = cands_[static_cast<size_t>(k)];
   if (c.profiled) return !c.skipped;
   c.profiled = true;
-  const size_t ns = c.shape.size();
-  std::vector<double> x(ns), lb(ns), ub(ns);
-  std::vector<bool> level(ns);
-  for (size_t k2 = 0; k2 < ns; ++k2) {
-    level[k2] = std::any_of(synthesized_.begin(), synthesized_.end(), [&](const spml_shape_param& sp) { return &sp == c.shape[k2]; });
-    lb[k2] = std::log(std::max(c.shape_range[k2].first, 1e-12));
-    ub[k2] = std::log(std::max(c.shape_range[k2].second, 2e-12));
+  const auto [lb, ub, level] = stateful_space(c);
+  std::vector<double> x(c.shape.size());
+  for (size_t k2 = 0; k2 < x.size(); ++k2)
     x[k2] = std::clamp(std::log(std::max(c.shape_values[k2], 1e-300)), lb[k2], ub[k2]);   // a level declared 0 sits at its floor
-  }
   for (const auto& key : profile_stateful(c, current, level, lb, ub, x))
     if (std::find(c.not_identifiable.begin(), c.not_identifiable.end(), key) == c.not_identifiable.end()) c.not_identifiable.push_back(key);
   if (shaped(c)) return true;
