@@ -362,15 +362,16 @@ enum class BreakAway {
 };
 
 // LuGre draw s of make_draw's family, its excitation's top frequency f_high (0: the default
-// band, 0.1-1 Hz): `stick_slip` named on its joint, fc within 20 %, fs as `fs` says.
-void expect_stick_slip(const std::filesystem::path& dir, int s, double f_high, BreakAway fs) {
+// band, 0.1-1 Hz): `stick_slip` named on its joint, fc within 20 %, fs as `fs` says. Returns
+// the report.
+nlohmann::json expect_stick_slip(const std::filesystem::path& dir, int s, double f_high, BreakAway fs) {
   Measurement m;
   m.f_high = f_high;
   const Draw d = make_draw(dir, "lugre", s, 0, m);
   const auto r = run_draw(dir, d, s);
   const auto causes = named(r);
   std::cout << d.what << " on j" << d.joint << ": named " << joined(causes) << "\n";
-  ASSERT_NE(std::find(causes.begin(), causes.end(), "stick_slip@j" + std::to_string(d.joint)), causes.end()) << joined(causes);
+  EXPECT_NE(std::find(causes.begin(), causes.end(), "stick_slip@j" + std::to_string(d.joint)), causes.end()) << joined(causes);
   for (const auto& cause : r["causes"])
     if (cause["effect"] == "stick_slip" && !cause.contains("superseded_by") && cause["joints"][0] == "j" + std::to_string(d.joint)) {
       const auto& free = cause["not_identifiable"];
@@ -386,6 +387,7 @@ void expect_stick_slip(const std::filesystem::path& dir, int s, double f_high, B
         EXPECT_TRUE(fs_error <= 0.2 || said_free) << "fs off by " << fs_error;
       }
     }
+  return r;
 }
 
 // LuGre on a random joint of a random spatial 3-joint chain, random levels (fc 6-15 % of the
@@ -410,6 +412,23 @@ TEST(DiagnoseBeyond, LuGreIsNamedOnRealisticDataAgainstTheStaticCandidates) {
 TEST(DiagnoseBeyond, LuGreOnAFrictionExperimentIsNamedWithItsBreakAway) {
   const auto dir = test::temp_dir("lugre_slow");
   for (int s : {2, 4, 6}) expect_stick_slip(dir, s, 0.3, BreakAway::within_20_percent);
+}
+
+// The keys of a stateful cause are chosen with the base parameters refitted, and there the
+// bristle damping sigma1 trades with the joint's damping (draw 18: sigma1 3.0 for 0.81 beside a
+// damping of 0.24 for 0.5). Judged against the MJCF's parameters with those keys unchanged, the
+// refitted ones looked contradicted, and `parameters` was named beside `stick_slip` on 6 of 16
+// friction-experiment draws (8-23), 10 and 18 among them. The model as given now has the keys
+// refitted with the base held (held_base_stateful): `stick_slip` alone, and the note says so.
+TEST(DiagnoseBeyond, LuGreBesideTheMJCFsOwnParametersIsRefittedWithThem) {
+  const auto dir = test::temp_dir("lugre_held");
+  for (int s : {10, 18}) {
+    const auto r = expect_stick_slip(dir, s, 0.3, BreakAway::within_20_percent);
+    EXPECT_EQ(named(r).size(), 1u) << joined(named(r));
+    bool said = false;
+    for (const auto& n : r["notes"]) said = said || n.get<std::string>().find("refitted with the MJCF's base parameters held") != std::string::npos;
+    EXPECT_TRUE(said) << r["notes"].dump();
+  }
 }
 
 // Draws 2 and 6 at the default band: their logs hold no break-away and the fit no LuGre shape.

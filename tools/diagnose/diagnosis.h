@@ -275,7 +275,7 @@ class Diagnosis {
   double scan_shape_keys(const Candidate& c, const Fit& current, const std::vector<bool>& level, const std::vector<double>& lb,
                          const std::vector<double>& ub, std::vector<double>& x) const;
   void polish_stateful(const Candidate& c, const Fit& current, const std::vector<double>& lb, const std::vector<double>& ub,
-                       std::vector<double>& x, int fixed = -1, int evals_per_key = 0) const;   // 0: the full polish
+                       std::vector<double>& x, const std::vector<bool>& held = {}, int evals_per_key = 0) const;   // 0: the full polish
   std::vector<std::string> profile_stateful(const Candidate& c, const Fit& current, const std::vector<bool>& level,
                                             const std::vector<double>& lb, const std::vector<double>& ub, const std::vector<double>& x) const;
   std::vector<double> grid_start(const Candidate& c, const Fit& current, const std::vector<bool>& level, const std::vector<double>& lb,
@@ -286,7 +286,8 @@ class Diagnosis {
   bool is_level(const spml_shape_param* sp) const;
   StatefulSpace stateful_space(const Candidate& c) const;
   bool shape_holds(int k, const Fit& current);
-  void stateful_errors(Candidate& c, const Fit& current, const std::vector<double>& x);
+  std::optional<Candidate> held_base_stateful(int k, const Fit& current) const;
+  void stateful_errors(Candidate& c, const Fit& current, const std::vector<double>& x) const;
   void stateful_report(const Candidate& c, double amplitude, nlohmann::json& params, nlohmann::json& se, nlohmann::json& j) const;
   Eigen::VectorXd written_stateful(const SplitData& s, const mjModel* ext) const;
   // unexplained.cc (#22)
