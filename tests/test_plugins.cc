@@ -176,6 +176,24 @@ TEST(ForcePlugins, StickSlipHoldsBelowBreakAway) {
   EXPECT_GT(v_slip, 0.5);
 }
 
+// start_steady: the state a measured row implies, when the log does not hold it. For LuGre at
+// a constant velocity v that is the bristles' steady deflection, and the force is the sliding
+// friction g(v) sign(v) + sigma2 v in closed form (g: the Stribeck curve). From the reset state
+// the force is sigma1 v + sigma2 v instead: diagnose's fits and rollouts began every split and
+// window in motion with that transient.
+TEST(ForcePlugins, StickSlipStartsSteadyAtTheMeasuredVelocity) {
+  const double fc = 3, fs = 4.5, vs = 0.05, sigma1 = 10, sigma2 = 0.1;
+  Loaded s(decl("ss", "type=stick_slip joints=a fc=3 fs=4.5 vs=0.05 sigma0=20000 sigma1=10 sigma2=0.1"));
+  for (double v : {0.2, -0.03, 0.01}) {
+    const double g = fc + (fs - fc) * std::exp(-(v / vs) * (v / vs));
+    s.fx->reset();
+    EXPECT_NEAR(s.force(0.1, 0, v, 0)[0], -(sigma1 + sigma2) * v, 1e-12) << v;
+    s.d->qvel[0] = v;
+    s.fx->start_steady(s.d.get());
+    EXPECT_NEAR(s.force(0.1, 0, v, 0)[0], -(std::copysign(g, v) + sigma2 * v), 1e-9 * fs) << v;
+  }
+}
+
 // mjcb_passive is process-wide; each model must get its own plugins' forces.
 TEST(ForcePlugins, DispatchIsPerModel) {
   Loaded one(decl("c", "type=offset joints=a c=1"), "one");

@@ -187,6 +187,12 @@ void PluginInstance::set_params(const Eigen::VectorXd& theta) {
   plugin_->set_params(state_, theta.data());
 }
 
+void PluginInstance::start_steady(const mjModel* m, const mjData* d) const {
+  if (plugin_->reset) plugin_->reset(state_);
+  if (plugin_->advance)
+    for (int k = 0; k < kSteadyStartSteps; ++k) plugin_->advance(state_, m, d, kSteadyStart / kSteadyStartSteps);
+}
+
 std::string PluginInstance::config_text() const {
   if (!plugin_->write_config) return "";
   std::vector<char> buf(256);
@@ -261,6 +267,10 @@ void ForceEffects::advance(const mjData* d, double dt) {
 void ForceEffects::reset() {
   for (auto& inst : instances_)
     if (inst.plugin().reset) inst.plugin().reset(inst.state());
+}
+
+void ForceEffects::start_steady(const mjData* d) {
+  for (auto& inst : instances_) inst.object.start_steady(m_, d);
 }
 
 std::vector<std::string> ForceEffects::param_names() const {

@@ -79,11 +79,13 @@ std::vector<double> Windows::run(Eigen::Index start, RolloutTrace* trace) {
   mjData* d = sim_.d();
   const auto nj = static_cast<size_t>(m->njnt);
   mj_resetData(m, d);
-  sim_.effects->reset();
   for (size_t j = 0; j < nj; ++j) {
     d->qpos[m->jnt_qposadr[j]] = s_.X(start, qc_[j]);
     d->qvel[m->jnt_dofadr[j]] = s_.X(start, qdc_[j]);
   }
+  // A stateful plugin's state at the measured start, as diagnose's fits take it: reset, a
+  // window that starts in motion began with LuGre's bristles unloaded.
+  sim_.effects->start_steady(d);
   Eigen::Index row = start, qrow = start;
   const double t0 = s_.t[start];
   std::vector<double> measured(nj), error(nj);

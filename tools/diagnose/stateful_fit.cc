@@ -33,8 +33,6 @@ namespace {
 constexpr double kNotIdentifiable = 0.5;   // relative standard error above which a key is reported not identifiable
 constexpr int kPolishEvalsPerKey = 300;    // subplex evaluations per fitted key (polish_stateful) ...
 constexpr double kPolishRows = 8000;       // ... up to this many rows per joint in the fit split
-constexpr double kWarmUp = 1;              // [s] simulated_columns: the first row's state held this long ...
-constexpr int kWarmUpSteps = 200;          // ... in this many advances
 constexpr int kProfileCells = 5;           // profile_stateful: points per shape key (cell centres of its log range) ...
 constexpr int kProfileEvalsPerKey = 100;   // ... each polished this long over the other keys
 constexpr double kProfileChi2 = 3.84;      // a profile point the data do not reject: chi-square(1) at 95 %
@@ -97,10 +95,9 @@ BlockColumns Diagnosis::simulated_columns(const PluginInstance& inst, const Spli
   BlockBuilder C(s.N, O, 1);
   std::vector<mjtNum> qfrc(static_cast<size_t>(m->nv));
   // The state at a record's first row is not in the log: it is taken as the steady state of
-  // that row's motion, the plugin advanced for kWarmUp with the row's state held (for a state
-  // the motion drives and that forgets, as LuGre's bristles). From the reset state instead, a
-  // split that starts in motion began with a transient of the bristles' damping (sigma1 v,
-  // -6 N m where the whole friction was 0.56), and LuGre lost a held-out test it won.
+  // that row's motion (PluginInstance::start_steady). From the reset state instead, a split
+  // that starts in motion began with a transient of the bristles' damping (sigma1 v, -6 N m
+  // where the whole friction was 0.56), and LuGre lost a held-out test it won.
   auto set_state = [&](Eigen::Index i) {
     for (int j = 0; j < m->njnt; ++j) {
       d->qpos[m->jnt_qposadr[j]] = s.split.X(i, s.cols->q[static_cast<size_t>(j)]);
@@ -109,11 +106,8 @@ BlockColumns Diagnosis::simulated_columns(const PluginInstance& inst, const Spli
   };
   for (Eigen::Index i = 0; i < s.N; ++i) {
     set_state(i);
-    if (i == 0 || std::find(s.runs.begin(), s.runs.end(), i) != s.runs.end()) {   // several --data: no state across a junction
-      if (inst.plugin().reset) inst.plugin().reset(inst.state());   // a declared plugin may be stateless (load.cc)
-      if (inst.plugin().advance)
-        for (int k = 0; k < kWarmUpSteps; ++k) inst.plugin().advance(inst.state(), m, d.get(), kWarmUp / kWarmUpSteps);
-    }
+    if (i == 0 || std::find(s.runs.begin(), s.runs.end(), i) != s.runs.end())   // several --data: no state across a junction
+      inst.start_steady(m, d.get());
     std::fill(qfrc.begin(), qfrc.end(), 0.0);
     inst.plugin().compute(inst.state(), m, d.get(), qfrc.data());
     for (int o = 0; o < O; ++o) C.set(o, i, 0, -qfrc[static_cast<size_t>(s.cols->output_dof[static_cast<size_t>(o)])]);

@@ -57,6 +57,11 @@ std::string force_plugin_problem(const spml_force_plugin& plugin);
 // One instance of a plugin made outside a model's declarations (diagnose's candidates): the
 // configuration is checked against the plugin's key table and completed with its defaults
 // exactly as for a declaration; `where` prefixes messages. Throws PluginError.
+// How long start_steady holds a state (1 s: LuGre's bristles settle within a few of their
+// pre-sliding displacements, milliseconds at any measured speed), in this many advances.
+inline constexpr double kSteadyStart = 1;
+inline constexpr int kSteadyStartSteps = 200;
+
 class PluginInstance {
  public:
   PluginInstance(const spml_force_plugin& plugin, const mjModel* m, const std::vector<int>& joints,
@@ -75,6 +80,10 @@ class PluginInstance {
   void set_params(const Eigen::VectorXd& theta);
   // The key=value words that recreate it (write_config); empty when the plugin cannot.
   std::string config_text() const;
+  // Reset, then advanced for kSteadyStart seconds with the state in d held: the internal state
+  // at a measured row, where the log does not hold it (a state the motion drives and that
+  // forgets, as LuGre's bristles; one that integrates displacement starts offset).
+  void start_steady(const mjModel* m, const mjData* d) const;
 
  private:
   const spml_force_plugin* plugin_;
@@ -112,6 +121,7 @@ class ForceEffects {
   // Steps internal states; call after every integrator step.
   void advance(const mjData* d, double dt);
   void reset();
+  void start_steady(const mjData* d);   // PluginInstance::start_steady for every instance
 
   // Parameter vector of all instances, names "<instance>.<plugin parameter>".
   int nparam() const { return nparam_; }
