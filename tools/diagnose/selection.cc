@@ -323,9 +323,11 @@ void Diagnosis::decide_parameters() {
     for (auto& [k, c] : held) {
       const Candidate& h = c;   // swapped in below
       std::string moved;
-      for (size_t m = 0; m < h.shape.size(); ++m)
-        moved += (m ? ", " : "") + std::string(h.shape[m]->key) + " " + fmt(cands_[static_cast<size_t>(k)].shape_values[m], 3) + " -> " +
-                 fmt(h.shape_values[m], 3);
+      for (size_t m = 0; m < h.shape.size(); ++m) {
+        const double was = cands_[static_cast<size_t>(k)].shape_values[m], is = h.shape_values[m];
+        if (fmt(was, 3) != fmt(is, 3))
+          moved += (moved.empty() ? "" : ", ") + std::string(h.shape[m]->key) + " " + fmt(was, 3) + " -> " + fmt(is, 3);
+      }
       notes_.push_back("`" + std::string(h.plugin->name) + "` on " + h.joint_name +
                        " refitted with the MJCF's base parameters held, as extended.xml states them (" + moved + ")");
     }
