@@ -105,7 +105,6 @@ nlohmann::json diagnose_case(const Case& c, const std::string& data) {
   opt.model = c.user;
   opt.data = data;
   opt.rollouts = 5;
-  if (const char* e = std::getenv("SPML_PROBE_EST")) opt.estimator = e;
   const auto t0 = std::chrono::steady_clock::now();
   nlohmann::json r = diagnose(opt, "").report;
   std::cout << "  " << data << ": " << std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() << " s\n";
@@ -439,6 +438,24 @@ TEST(DiagnoseBeyond, LuGreBesideTheMJCFsOwnParametersIsRefittedWithThem) {
     bool said = false;
     for (const auto& n : r["notes"]) said = said || n.get<std::string>().find("refitted with the MJCF's base parameters held") != std::string::npos;
     EXPECT_TRUE(said) << r["notes"].dump();
+  }
+}
+
+// The logger's half tick (the states -0.25 to -0.42 ms ahead of the torque held over each
+// tick, TheLoggersHalfTickIsCorrectedWithoutAName) searched beside LuGre: the delay search's
+// static nuisance does not hold the bristles' lag, and draws 5 and 7 of the default band read
+// the offset as 0.86 +- 0.55 and 0.06 +- 0.26 ms, not resolved. Left in, it read the inertias'
+// torque as damping (0.488 and 0.488 for 0.5 on j0) and `parameters` was named beside
+// `stick_slip` (6 of 24 draws). Now it is searched again beside the stateful cause chosen
+// (refine_logger_offset), corrected, and the causes chosen again: `stick_slip` alone.
+TEST(DiagnoseBeyond, TheLoggersHalfTickIsFoundBesideLuGre) {
+  const auto dir = test::temp_dir("halftick_lugre");
+  for (int s : {5, 7}) {
+    const auto r = expect_stick_slip(dir, s, 0, BreakAway::within_20_or_said_free);
+    EXPECT_EQ(named(r).size(), 1u) << joined(named(r));
+    EXPECT_TRUE(r["delay"]["corrected"].get<bool>()) << r["delay"].dump();
+    EXPECT_FALSE(r["delay"]["named"].get<bool>());
+    EXPECT_NEAR(r["delay"]["seconds"].get<double>(), -0.35e-3, 0.15e-3) << r["delay"].dump();
   }
 }
 

@@ -261,6 +261,8 @@ class Diagnosis {
   Eigen::VectorXd targets_at(const SplitData& s, double d) const;
   Eigen::VectorXd net_of_frictionloss(const SplitData& s) const;
   BlockColumns coulomb_nuisance(const SplitData& s) const;
+  std::vector<BlockColumns> delay_nuisance(const SplitData& s) const;
+  bool refine_logger_offset(const std::vector<int>& kept);
   void swap_delay();
   void drop_delay();
   double free_parameters(const std::vector<int>& causes, const Fit& f) const;
@@ -332,6 +334,7 @@ class Diagnosis {
   std::vector<std::string> notes_;
   FilterPlan filter_plan_;
   DelayResult delay_;   // #22
+  std::vector<int> offset_beside_;   // #22: causes beside the delay search's nuisance (refine_logger_offset)
   mutable std::optional<bool> degrees_;   // the model file's hinge angles in degrees (written_form.cc)
   mutable std::optional<std::vector<std::string>> defined_joints_;   // the joints the model file itself defines (written_form.cc)
   mutable std::shared_ptr<mjData> sim_data_;   // #22: the state the stateful simulations read (one thread)

@@ -82,9 +82,19 @@ void Diagnosis::select() {
   auto t_delay = Clock::now();
   estimate_delay();   // #22: a delay is corrected before any other cause is estimated (delay.cc)
   result_.timings.search += since(t_delay);
-  if (!delay_.named) return forward_backward();
-  const std::vector<Candidate> fresh = cands_;
+  const std::vector<Candidate> fresh = cands_;   // unsearched: cheap to keep
   const nlohmann::json fresh_not_tried = not_tried_;
+  if (!delay_.named) {
+    forward_backward();
+    t_delay = Clock::now();
+    const bool again = refine_logger_offset(kept_effects());   // #22: the logger's offset beside a chosen stateful cause (delay.cc)
+    result_.timings.search += since(t_delay);
+    if (!again) return;
+    cands_ = fresh;
+    causes_.clear();
+    not_tried_ = fresh_not_tried;
+    return forward_backward();
+  }
   forward_backward();
   const std::vector<int> kept_a = kept_effects();
   const Fit fa = refit(kept_a, true);
