@@ -424,23 +424,6 @@ TEST(DiagnoseBeyond, LuGreOnAFrictionExperimentIsNamedWithItsBreakAway) {
   for (int s : {2, 4, 6}) expect_stick_slip(dir, s, 0.3, BreakAway::within_20_percent);
 }
 
-// The keys of a stateful cause are chosen with the base parameters refitted, and there the
-// bristle damping sigma1 trades with the joint's damping (draw 18: sigma1 3.0 for 0.81 beside a
-// damping of 0.24 for 0.5). Judged against the MJCF's parameters with those keys unchanged, the
-// refitted ones looked contradicted, and `parameters` was named beside `stick_slip` on 6 of 16
-// friction-experiment draws (8-23), 10 and 18 among them. The model as given now has the keys
-// refitted with the base held (held_base_stateful): `stick_slip` alone, and the note says so.
-TEST(DiagnoseBeyond, LuGreBesideTheMJCFsOwnParametersIsRefittedWithThem) {
-  const auto dir = test::temp_dir("lugre_held");
-  for (int s : {10, 18}) {
-    const auto r = expect_stick_slip(dir, s, 0.3, BreakAway::within_20_percent);
-    EXPECT_EQ(named(r).size(), 1u) << joined(named(r));
-    bool said = false;
-    for (const auto& n : r["notes"]) said = said || n.get<std::string>().find("refitted with the MJCF's base parameters held") != std::string::npos;
-    EXPECT_TRUE(said) << r["notes"].dump();
-  }
-}
-
 // The logger's half tick (the states -0.25 to -0.42 ms ahead of the torque held over each
 // tick, TheLoggersHalfTickIsCorrectedWithoutAName) searched beside LuGre: the delay search's
 // static nuisance does not hold the bristles' lag, and draws 5 and 7 of the default band read

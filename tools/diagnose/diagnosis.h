@@ -288,7 +288,6 @@ class Diagnosis {
   bool is_level(const spml_shape_param* sp) const;
   StatefulSpace stateful_space(const Candidate& c) const;
   bool shape_holds(int k, const Fit& current);
-  std::optional<Candidate> held_base_stateful(int k, const Fit& current) const;
   void stateful_errors(Candidate& c, const Fit& current, const std::vector<double>& x) const;
   void stateful_report(const Candidate& c, double amplitude, nlohmann::json& params, nlohmann::json& se, nlohmann::json& j) const;
   Eigen::VectorXd written_stateful(const SplitData& s, const mjModel* ext) const;

@@ -278,26 +278,7 @@ void Diagnosis::eliminate_backward(bool base_free) {
 // a contradiction of the MJCF the data do not hold.
 void Diagnosis::decide_parameters() {
   const std::vector<int> effects = kept_effects();
-  // The model as given holds the base parameters, and a stateful cause's keys are refitted with
-  // them held (held_base_stateful): `held` keeps, for each such cause, the version not in cands_.
-  std::vector<std::pair<int, Candidate>> held;
-  for (int k : effects) {
-    if (!cands_[static_cast<size_t>(k)].stateful) continue;
-    std::vector<int> others;
-    for (int m : effects)
-      if (m != k) others.push_back(m);
-    if (auto h = held_base_stateful(k, refit(others, false))) {
-      held.emplace_back(k, std::move(*h));
-      std::swap(cands_[static_cast<size_t>(k)], held.back().second);
-    }
-  }
-  auto swap_held = [&] {
-    for (auto& [k, c] : held) std::swap(cands_[static_cast<size_t>(k)], c);
-  };
-  const Fit fixed = refit(effects, false);
-  const Eigen::VectorXd before = residual_on(test_, effects, false, fixed);
-  swap_held();   // the keys fitted with the base refitted
-  const Fit free = refit(effects, true, true);
+  const Fit free = refit(effects, true, true), fixed = refit(effects, false);
   const double n = static_cast<double>(fit_.y0.size());
   parameters_n_eff_ = n * effective_fraction(free.residual, fit_.N);
   parameters_delta_bic_ = delta_bic(parameters_n_eff_, fixed.rss, free.rss, free.rank - fixed.rank, rss_floor(fit_.b));
@@ -306,14 +287,14 @@ void Diagnosis::decide_parameters() {
   for (int i = 0; i < base_.rank; ++i)
     parameters_contradicted_ += parameters_fit_.determined[static_cast<size_t>(i)] &&
                                 std::fabs(parameters_fit_.coef[i]) > 3 * parameters_fit_.stderr_[i];
-// The held-out gain under either noise model: one variance for every joint (the residual sum
+  // The held-out gain under either noise model: one variance for every joint (the residual sum
   // of squares in N m^2) or one per joint (the geometric mean of each joint's sum relative to
   // its own as given). The base parameters act on every joint: a contradiction on a small joint
   // shows in the second only (viscous friction on a wrist joint through raw differences: 76 %
   // less on its joint, 1.8 % less in the sum), one on a large joint among small, noisy ones in
   // the first only (viscous on a base joint: 99.9 % less on it, a 0.004 N m residual five times
   // larger on the last joint).
-  const Eigen::VectorXd after = residual_on(test_, effects, true, free);
+  const Eigen::VectorXd before = residual_on(test_, effects, false, fixed), after = residual_on(test_, effects, true, free);
   const Eigen::Index outputs = before.size() / test_.N;
   double log_ratio = 0;
   for (Eigen::Index o = 0; o < outputs; ++o) {
@@ -327,23 +308,8 @@ void Diagnosis::decide_parameters() {
   parameters_named_ = evidence && parameters_contradicted_ > 0;
   // The causes were chosen with the base parameters refitted; without `parameters` the model
   // keeps the MJCF's, and a cause must still gain there (an offset of 0.9 standard errors
-  // made its joint's held-out error worse, 0.048115 -> 0.048151, and was named); a stateful
-  // cause keeps the keys refitted with them.
-  if (!parameters_named_) {
-    for (auto& [k, c] : held) {
-      const Candidate& h = c;   // swapped in below
-      std::string moved;
-      for (size_t m = 0; m < h.shape.size(); ++m) {
-        const double was = cands_[static_cast<size_t>(k)].shape_values[m], is = h.shape_values[m];
-        if (fmt(was, 3) != fmt(is, 3))
-          moved += (moved.empty() ? "" : ", ") + std::string(h.shape[m]->key) + " " + fmt(was, 3) + " -> " + fmt(is, 3);
-      }
-      notes_.push_back("`" + std::string(h.plugin->name) + "` on " + h.joint_name +
-                       " refitted with the MJCF's base parameters held, as extended.xml states them (" + moved + ")");
-    }
-    swap_held();
-    eliminate_backward(false);
-  }
+  // made its joint's held-out error worse, 0.048115 -> 0.048151, and was named).
+  if (!parameters_named_) eliminate_backward(false);
   if (evidence && !parameters_named_)
     notes_.push_back("refitting the base parameters passes the evidence and test thresholds, but none lies beyond three "
                      "autocorrelation-robust standard errors of the MJCF's value: `parameters` is not named");

@@ -512,45 +512,6 @@ bool Diagnosis::shape_holds(int k, const Fit& current) {
   return false;
 }
 
-// A stateful cause's keys refitted with the base parameters held at the MJCF's values
-// (decide_parameters): `current` is the fit of the other kept causes with the base held, the
-// polish starts from the keys fitted with the base refitted, and levels declared 0 stay 0.
-// The keys it was chosen with had traded with the base parameters (the bristle damping sigma1
-// with the joint's damping: 3.0 for 0.81 beside a damping of 0.24 for 0.5), and against the
-// model as given with those keys unchanged the refitted base looked contradicted: `parameters`
-// was named beside `stick_slip` on 6 of 16 friction-experiment draws. Empty when the polish
-// gains nothing, or its keys are not what settle_levels accepts (a shape key at the end of its
-// range, a level not determined).
-std::optional<Candidate> Diagnosis::held_base_stateful(int k, const Fit& current) const {
-  Candidate c = cands_[static_cast<size_t>(k)];
-  const auto [lb, ub, level] = stateful_space(c);
-  const size_t ns = c.shape.size();
-  std::vector<double> x(ns);
-  std::vector<bool> zero(ns, false);
-  for (size_t m = 0; m < ns; ++m) {
-    zero[m] = c.shape_values[m] == 0;
-    x[m] = zero[m] ? std::log(1e-300) : std::clamp(std::log(c.shape_values[m]), lb[m], ub[m]);
-  }
-  const double before = stateful_drop(c, current, x);
-  polish_stateful(c, current, lb, ub, x, zero);
-  if (!(stateful_drop(c, current, x) > before)) return std::nullopt;
-  const std::vector<std::string> profiled = c.not_identifiable;
-  stateful_errors(c, current, x);
-  for (const auto& key : profiled)
-    if (std::find(c.not_identifiable.begin(), c.not_identifiable.end(), key) == c.not_identifiable.end()) c.not_identifiable.push_back(key);
-  for (size_t m = 0; m < ns; ++m) {
-    if (zero[m]) continue;
-    if (!level[m] && (x[m] <= lb[m] + 1e-3 || x[m] >= ub[m] - 1e-3)) return std::nullopt;
-    if (level[m] && !(c.stateful_se[m] <= kNotIdentifiable * std::exp(x[m]))) return std::nullopt;
-    c.shape_values[m] = std::exp(x[m]);
-  }
-  if (!shaped(c)) return std::nullopt;
-  PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
-  c.fit_cols = simulated_columns(inst, fit_);
-  c.gain = gain_of(c.fit_cols, current.Q(), current.residual);
-  return c;
-}
-
 // The held-out comparison: a static cause about to join on a joint where a stateful candidate
 // also passes is compared with it on the test split (the joint's outputs, each fitted with the
 // causes already chosen); the stateful one joins instead when its held-out residual sum of

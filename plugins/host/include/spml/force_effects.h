@@ -54,14 +54,16 @@ const PluginKind& force_plugin_kind();
 // missing, a shape parameter that is not a config key or has an invalid search range).
 std::string force_plugin_problem(const spml_force_plugin& plugin);
 
-// One instance of a plugin made outside a model's declarations (diagnose's candidates): the
-// configuration is checked against the plugin's key table and completed with its defaults
-// exactly as for a declaration; `where` prefixes messages. Throws PluginError.
-// How long start_steady holds a state (1 s: LuGre's bristles settle within a few of their
-// pre-sliding displacements, milliseconds at any measured speed), in this many advances.
+// How long PluginInstance::start_steady holds a state: 1 s. LuGre's bristles settle at the rate
+// sigma0 |v| / g(v), within a few of their pre-sliding deflections of travel: in milliseconds at
+// the speeds of a motion, while near rest (a few mrad/s) they only part settle - where the log
+// cannot say the state either. In this many advances (a plugin may integrate explicitly).
 inline constexpr double kSteadyStart = 1;
 inline constexpr int kSteadyStartSteps = 200;
 
+// One instance of a plugin made outside a model's declarations (diagnose's candidates): the
+// configuration is checked against the plugin's key table and completed with its defaults
+// exactly as for a declaration; `where` prefixes messages. Throws PluginError.
 class PluginInstance {
  public:
   PluginInstance(const spml_force_plugin& plugin, const mjModel* m, const std::vector<int>& joints,
