@@ -296,15 +296,16 @@ void Diagnosis::delay_decide(double d, const std::function<Eigen::VectorXd(doubl
 // on 6 of 24 default-band LuGre draws. The data go back to as measured and the offset is
 // searched again; only a resolved logger's offset (what estimate_delay corrects without a
 // name) is taken, else the first estimate stands. Returns whether the correction changed: the
-// causes must then be chosen again on the data corrected anew.
-bool Diagnosis::refine_logger_offset(const std::vector<int>& kept) {
+// causes must then be chosen again on the data corrected anew; `first` gets the first
+// estimate, for select() to put back (swap_delay, delay_ = first, swap_delay).
+bool Diagnosis::refine_logger_offset(const std::vector<int>& kept, DelayResult& first) {
   if (delay_.named || delay_.withheld || filter_plan_.raw_differences || uniform_step(fit_) <= 0 || uniform_step(test_) <= 0) return false;
   std::vector<int> stateful;
   for (int k : kept)
     if (cands_[static_cast<size_t>(k)].stateful) stateful.push_back(k);
   if (stateful.empty()) return false;
   swap_delay();   // as measured (nothing to swap when the first estimate corrected nothing) ...
-  const DelayResult first = delay_;   // ... its `other` now holds the first correction's data
+  first = delay_;   // ... its `other` now holds the first correction's data
   delay_ = DelayResult{};
   offset_beside_ = stateful;
   estimate_delay();
@@ -320,7 +321,7 @@ bool Diagnosis::refine_logger_offset(const std::vector<int>& kept) {
   std::string beside;
   for (int k : stateful) beside += (beside.empty() ? "" : ", ") + std::string(cands_[static_cast<size_t>(k)].plugin->name) + " on " + cands_[static_cast<size_t>(k)].joint_name;
   delay_.why += " (searched again beside the stateful causes first chosen - " + beside + " - whose lag the static nuisance does not hold; " +
-                (first.corrected ? "first estimate " + fmt(first.seconds) + " s" : "first estimate " + fmt(first.seconds) + " +- " + fmt(first.stderr_, 2) + " s, not resolved") +
+                (first.corrected ? "first estimate " + fmt(first.seconds) + " s" : "first estimate " + fmt(first.seconds) + " +- " + fmt(first.stderr_, 2) + " s, not corrected") +
                 "; the causes were then chosen again)";
   return true;
 }

@@ -262,7 +262,7 @@ class Diagnosis {
   Eigen::VectorXd net_of_frictionloss(const SplitData& s) const;
   BlockColumns coulomb_nuisance(const SplitData& s) const;
   std::vector<BlockColumns> delay_nuisance(const SplitData& s) const;
-  bool refine_logger_offset(const std::vector<int>& kept);
+  bool refine_logger_offset(const std::vector<int>& kept, DelayResult& first);
   void swap_delay();
   void drop_delay();
   double free_parameters(const std::vector<int>& causes, const Fit& f) const;

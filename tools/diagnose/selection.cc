@@ -86,14 +86,34 @@ void Diagnosis::select() {
   const nlohmann::json fresh_not_tried = not_tried_;
   if (!delay_.named) {
     forward_backward();
+    const std::vector<int> kept = kept_effects();
     t_delay = Clock::now();
-    const bool again = refine_logger_offset(kept_effects());   // #22: the logger's offset beside a chosen stateful cause (delay.cc)
+    DelayResult first;
+    const bool again = refine_logger_offset(kept, first);   // #22: the logger's offset beside a chosen stateful cause (delay.cc)
     result_.timings.search += since(t_delay);
     if (!again) return;
+    std::vector<Candidate> cands_1 = std::move(cands_);
+    std::vector<Cause> causes_1 = std::move(causes_);
+    nlohmann::json not_tried_1 = std::move(not_tried_);
     cands_ = fresh;
     causes_.clear();
     not_tried_ = fresh_not_tried;
-    return forward_backward();
+    forward_backward();
+    // The offset was read beside the stateful causes first chosen; chosen again without one of
+    // them, its premise is gone, and the first estimate and selection stand (a fresh LuGre
+    // draw had `coulomb`, a ripple and `parameters` in place of `stick_slip`).
+    const std::vector<int> kept_again = kept_effects();
+    for (int k : kept)
+      if (cands_1[static_cast<size_t>(k)].stateful && std::find(kept_again.begin(), kept_again.end(), k) == kept_again.end()) {
+        swap_delay();
+        delay_ = std::move(first);
+        swap_delay();
+        cands_ = std::move(cands_1);
+        causes_ = std::move(causes_1);
+        not_tried_ = std::move(not_tried_1);
+        return;
+      }
+    return;
   }
   forward_backward();
   const std::vector<int> kept_a = kept_effects();
