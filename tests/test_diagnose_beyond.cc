@@ -242,9 +242,11 @@ namespace {
 
 // One seeded draw of a kind: "clean", "delay" (the torque log SPML_BEYOND_DELAY_MS / `delay_ms`
 // late), "delay_coulomb" (and Coulomb friction of 10 % of its RMS torque on another joint),
-// "lugre" (LuGre friction of random levels on a random joint), "cubic" (cubic damping of 20 %
-// of the joint's RMS torque), "stop" (a one-sided end stop over the top fifth of the joint's
-// stroke, 0.6 of its RMS torque at the far end): the last two are outside the vocabulary.
+// "lugre" (LuGre friction of random levels on a random joint), "lugre_delay" (both: the
+// torque log late and LuGre, whose lag the delay search's static nuisance does not hold),
+// "cubic" (cubic damping of 20 % of the joint's RMS torque), "stop" (a one-sided end stop over
+// the top fifth of the joint's stroke, 0.6 of its RMS torque at the far end): the last two are
+// outside the vocabulary.
 struct Draw {
   Case c;
   Measurement m;
@@ -263,9 +265,9 @@ Draw make_draw(const std::filesystem::path& dir, const std::string& kind, int s,
   const double rms = rms_torque(d.c.user, d.joint);
   std::string decl;
   d.what = kind;
-  if (kind == "delay" || kind == "delay_coulomb") m.delay_samples = static_cast<int>(std::lround(delay_ms));   // 1 kHz: 1 tick = 1 ms
+  if (kind == "delay" || kind == "delay_coulomb" || kind == "lugre_delay") m.delay_samples = static_cast<int>(std::lround(delay_ms));   // 1 kHz: 1 tick = 1 ms
   if (kind == "delay_coulomb") decl = "type=coulomb joints=j" + std::to_string(d.other) + " fc=" + test::num(0.1 * rms_torque(d.c.user, d.other));
-  if (kind == "lugre") {
+  if (kind == "lugre" || kind == "lugre_delay") {
     std::uniform_real_distribution<double> u(0, 1);
     d.fc = (0.06 + 0.09 * u(rng)) * rms, d.fs = (1.2 + 0.8 * u(rng)) * d.fc;
     const double sigma0 = d.fc / (1e-3 + 2e-3 * u(rng)), vs = 0.03 + 0.2 * u(rng);
