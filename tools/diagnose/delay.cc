@@ -210,10 +210,7 @@ void Diagnosis::delay_decide(double d, const std::function<Eigen::VectorXd(doubl
     std::vector<BlockColumns> F{shifted_block(fit_.base, dd, h)}, T{shifted_block(test_.base, dd, ht)};
     for (size_t b = 0; b < nuis_fit.size(); ++b) F.push_back(shifted_block(nuis_fit[b], dd, h)), T.push_back(shifted_block(nuis_test[b], dd, ht));
     const Fit f = fit_blocks(pointers(F), net_of_frictionloss(fit_), false);
-    Eigen::VectorXd pred = Eigen::VectorXd::Zero(test_.y0.size());
-    Eigen::Index at = 0;
-    for (const auto& b : T) pred += b.times(f.coef.segment(at, b.cols)), at += b.cols;
-    return (net_of_frictionloss(test_) - pred).squaredNorm();
+    return (net_of_frictionloss(test_) - predict_blocks(pointers(T), f.coef, test_.y0.size())).squaredNorm();
   };
   // A lead of half a sample is the hold itself (see kMinDelay): at 200 Hz it is 2.5 ms, above
   // kMinDelay, and clean simulated logs had it named. Offsets near it are not named either.

@@ -129,6 +129,14 @@ struct Cause {
   std::string superseded_by;
 };
 
+// A selection's state (select() makes two and keeps one): the candidates as searched, the
+// causes chosen, what was not tried.
+struct Selection {
+  std::vector<Candidate> cands;
+  std::vector<Cause> causes;
+  nlohmann::json not_tried;
+};
+
 // The parameters extended.xml states when `parameters` is named (written_parameters.cc).
 struct WrittenParameters {
   ConsistentIdentification id;      // standard parameters; id.extra: the kept effects' coefficients
@@ -263,6 +271,8 @@ class Diagnosis {
   BlockColumns coulomb_nuisance(const SplitData& s) const;
   std::vector<BlockColumns> delay_nuisance(const SplitData& s) const;
   bool refine_logger_offset(const std::vector<int>& kept, DelayResult& first);
+  Selection choose_again(const Selection& fresh);
+  void restore(Selection&& s);
   void swap_delay();
   void drop_delay();
   double free_parameters(const std::vector<int>& causes, const Fit& f) const;
@@ -277,7 +287,7 @@ class Diagnosis {
   double scan_shape_keys(const Candidate& c, const Fit& current, const std::vector<bool>& level, const std::vector<double>& lb,
                          const std::vector<double>& ub, std::vector<double>& x) const;
   void polish_stateful(const Candidate& c, const Fit& current, const std::vector<double>& lb, const std::vector<double>& ub,
-                       std::vector<double>& x, const std::vector<bool>& held = {}, int evals_per_key = 0) const;   // 0: the full polish
+                       std::vector<double>& x, int fixed = -1, int evals_per_key = 0) const;   // 0: the full polish
   std::vector<std::string> profile_stateful(const Candidate& c, const Fit& current, const std::vector<bool>& level,
                                             const std::vector<double>& lb, const std::vector<double>& ub, const std::vector<double>& x) const;
   std::vector<double> grid_start(const Candidate& c, const Fit& current, const std::vector<bool>& level, const std::vector<double>& lb,

@@ -82,8 +82,7 @@ void Diagnosis::select() {
   auto t_delay = Clock::now();
   estimate_delay();   // #22: a delay is corrected before any other cause is estimated (delay.cc)
   result_.timings.search += since(t_delay);
-  const std::vector<Candidate> fresh = cands_;   // unsearched: cheap to keep
-  const nlohmann::json fresh_not_tried = not_tried_;
+  const Selection fresh{cands_, causes_, not_tried_};   // unsearched: cheap to keep
   if (!delay_.named) {
     forward_backward();
     const std::vector<int> kept = kept_effects();
@@ -92,26 +91,17 @@ void Diagnosis::select() {
     const bool again = refine_logger_offset(kept, first);   // #22: the logger's offset beside a chosen stateful cause (delay.cc)
     result_.timings.search += since(t_delay);
     if (!again) return;
-    std::vector<Candidate> cands_1 = std::move(cands_);
-    std::vector<Cause> causes_1 = std::move(causes_);
-    nlohmann::json not_tried_1 = std::move(not_tried_);
-    cands_ = fresh;
-    causes_.clear();
-    not_tried_ = fresh_not_tried;
-    forward_backward();
+    Selection made = choose_again(fresh);
     // The offset was read beside the stateful causes first chosen; chosen again without one of
     // them, its premise is gone, and the first estimate and selection stand (a fresh LuGre
     // draw had `coulomb`, a ripple and `parameters` in place of `stick_slip`).
     const std::vector<int> kept_again = kept_effects();
     for (int k : kept)
-      if (cands_1[static_cast<size_t>(k)].stateful && std::find(kept_again.begin(), kept_again.end(), k) == kept_again.end()) {
+      if (made.cands[static_cast<size_t>(k)].stateful && std::find(kept_again.begin(), kept_again.end(), k) == kept_again.end()) {
         swap_delay();
         delay_ = std::move(first);
         swap_delay();
-        cands_ = std::move(cands_1);
-        causes_ = std::move(causes_1);
-        not_tried_ = std::move(not_tried_1);
-        return;
+        return restore(std::move(made));
       }
     return;
   }
@@ -119,14 +109,8 @@ void Diagnosis::select() {
   const std::vector<int> kept_a = kept_effects();
   const Fit fa = refit(kept_a, true);
   const double test_a = residual_on(test_, kept_a, true, fa).squaredNorm(), k_a = free_parameters(kept_a, fa) + 1;
-  std::vector<Candidate> cands_a = std::move(cands_);
-  std::vector<Cause> causes_a = std::move(causes_);
-  nlohmann::json not_tried_a = std::move(not_tried_);
   swap_delay();
-  cands_ = fresh;
-  causes_.clear();
-  not_tried_ = fresh_not_tried;
-  forward_backward();
+  Selection corrected = choose_again(fresh);
   const std::vector<int> kept_b = kept_effects();
   const Fit fb = refit(kept_b, true);
   const double test_b = residual_on(test_, kept_b, true, fb).squaredNorm();
@@ -135,9 +119,22 @@ void Diagnosis::select() {
                           gains_on_test(test_b, test_a, std::max(opt_.min_gain, kMinDelayGain), rss_floor(test_.b));
   if (!delay_wins) return drop_delay();
   swap_delay();
-  cands_ = std::move(cands_a);
-  causes_ = std::move(causes_a);
-  not_tried_ = std::move(not_tried_a);
+  restore(std::move(corrected));
+}
+
+// The selection made so far, set aside, and the causes chosen again from `fresh` (select():
+// on the data as measured, or corrected anew).
+Selection Diagnosis::choose_again(const Selection& fresh) {
+  Selection made{std::move(cands_), std::move(causes_), std::move(not_tried_)};
+  restore(Selection(fresh));
+  forward_backward();
+  return made;
+}
+
+void Diagnosis::restore(Selection&& s) {
+  cands_ = std::move(s.cands);
+  causes_ = std::move(s.causes);
+  not_tried_ = std::move(s.not_tried);
 }
 
 // Free parameters of a fit with `causes`: its rank and the causes' shape keys.

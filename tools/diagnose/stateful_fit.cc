@@ -300,16 +300,15 @@ std::vector<double> Diagnosis::grid_start(const Candidate& c, const Fit& current
 
 // Subplex on the drop, from x, one pass (restarts from its own end point, which 80 evaluations
 // per key had needed, left the LuGre draws' optimum unchanged at 400 per key).
-// `held` (empty: none): keys held at their values in x (the profile's key, levels declared 0);
-// `evals_per_key` 0: kPolishEvalsPerKey.
+// `fixed` (an index, or -1): a key held at its value in x (the profile's); `evals_per_key` 0:
+// kPolishEvalsPerKey.
 void Diagnosis::polish_stateful(const Candidate& c, const Fit& current, const std::vector<double>& lb, const std::vector<double>& ub,
-                                std::vector<double>& x, const std::vector<bool>& held, int evals_per_key) const {
-  // The free keys: x without the held ones.
+                                std::vector<double>& x, int fixed, int evals_per_key) const {
+  // The free keys: x without the fixed one.
   if (evals_per_key <= 0) evals_per_key = kPolishEvalsPerKey;
   std::vector<size_t> free;
   for (size_t k = 0; k < x.size(); ++k)
-    if (held.empty() || !held[k]) free.push_back(k);
-  if (free.empty()) return;
+    if (static_cast<int>(k) != fixed) free.push_back(k);
   struct Ctx {
     const Diagnosis* self;
     const Candidate* c;
@@ -369,9 +368,7 @@ std::vector<std::string> Diagnosis::profile_stateful(const Candidate& c, const F
     if (level[k] && !std::isfinite(stateful_drop(c, current, p)))
       for (size_t m = 0; m < ns; ++m)
         if (m != k && level[m]) p[m] = std::clamp(p[m] + value - x[k], lb[m], ub[m]);
-    std::vector<bool> held(ns, false);
-    held[k] = true;
-    polish_stateful(c, current, lb, ub, p, held, kProfileEvalsPerKey);
+    polish_stateful(c, current, lb, ub, p, static_cast<int>(k), kProfileEvalsPerKey);
     points.push_back(std::move(p));
   };
   for (size_t k = 0; k < ns; ++k) {
