@@ -361,6 +361,7 @@ TEST(DiagnoseBeyond, DelayIsFoundBesideStaticFriction) {
 enum class BreakAway {
   within_20_percent,       // the log holds break-away: fs within 20 % and determined
   within_20_or_said_free,  // fs within 20 %, or reported not identifiable
+  said_free,               // fs reported not identifiable (the log holds no break-away)
 };
 
 // LuGre draw s of make_draw's family, its excitation's top frequency f_high (0: the default
@@ -398,6 +399,9 @@ nlohmann::json expect_stick_slip(const std::filesystem::path& dir, int s, double
       if (fs == BreakAway::within_20_or_said_free) {
         EXPECT_TRUE(fs_error <= 0.2 || said_free) << "fs off by " << fs_error;
       }
+      if (fs == BreakAway::said_free) {
+        EXPECT_TRUE(said_free) << free.dump();
+      }
     }
   return r;
 }
@@ -432,7 +436,7 @@ TEST(DiagnoseBeyond, LuGreOnAFrictionExperimentIsNamedWithItsBreakAway) {
 // the offset as 0.86 +- 0.55 and 0.06 +- 0.26 ms, not resolved. Left in, it read the inertias'
 // torque as damping (0.488 and 0.488 for 0.5 on j0) and `parameters` was named beside
 // `stick_slip` (6 of 24 draws). Now it is searched again beside the stateful cause chosen
-// (refine_logger_offset), corrected, and the causes chosen again: `stick_slip` alone.
+// (offset_beside), corrected, and the causes chosen again: `stick_slip` alone.
 TEST(DiagnoseBeyond, TheLoggersHalfTickIsFoundBesideLuGre) {
   const auto dir = test::temp_dir("halftick_lugre");
   for (int s : {5, 7}) {
@@ -441,6 +445,25 @@ TEST(DiagnoseBeyond, TheLoggersHalfTickIsFoundBesideLuGre) {
     EXPECT_TRUE(r["delay"]["corrected"].get<bool>()) << r["delay"].dump();
     EXPECT_FALSE(r["delay"]["named"].get<bool>());
     EXPECT_NEAR(r["delay"]["seconds"].get<double>(), -0.35e-3, 0.15e-3) << r["delay"].dump();
+  }
+}
+
+// A 5 ms delay beside LuGre (seed-table kind lugre_delay): the first search, with only static
+// friction beside the shift, read draws 5 and 7 as 5.87 +- 0.57 and 5.08 +- 0.24 ms, and on
+// data so corrected the inertias' torque was read as damping and `parameters` was named beside
+// `stick_slip`. Searched again beside the LuGre force chosen (offset_beside) they read 4.73 ms,
+// like a delay alone (4.6-4.8 ms: the torque held over each tick), and the causes chosen again
+// are the delay and `stick_slip` on its joint.
+TEST(DiagnoseBeyond, ADelayBesideLuGreIsSearchedAgainBesideIt) {
+  const auto dir = test::temp_dir("lugre_delay");
+  for (int s : {5, 7}) {
+    const Draw d = make_draw(dir, "lugre_delay", s, 5, Measurement{});
+    const auto r = run_draw(dir, d, s);
+    std::cout << d.what << ": delay " << 1e3 * r["delay"]["seconds"].get<double>() << " ± " << 1e3 * r["delay"]["stderr"].get<double>()
+              << " ms, named " << joined(named(r)) << "\n  " << r["delay"]["why"] << "\n";
+    ASSERT_TRUE(r["delay"]["named"].get<bool>()) << r["delay"].dump();
+    EXPECT_NEAR(r["delay"]["seconds"].get<double>(), 5e-3, 0.5e-3);
+    EXPECT_EQ(joined(named(r)), "delay stick_slip@j" + std::to_string(d.joint));
   }
 }
 
@@ -484,30 +507,47 @@ TEST(DiagnoseBeyond, LuGreWrittenModelPredictsFreshLogs) {
   }
 }
 
-// Draws 2 and 6 at the default band: their logs hold no break-away and the fit no LuGre shape.
-// Fits with fs 0.058 and 0.0577 (draw 2, truth 0.100) or 0.556 and 21 (draw 6, truth 0.763)
-// were about equally good, vs ran to the top of its range on draw 6, and `stick_slip` had been
-// named with fs 42 and 27 % low, its errors saying determined (they were `coulomb` before the
-// stateful fit polished from a grid, grid_start, too). Now: the static friction of its level,
-// Coulomb's fc within 20 % of LuGre's, and `stick_slip` on that joint in `not_tried` with why.
-TEST(DiagnoseBeyond, LuGreWhoseLogShowsNoShapeIsItsStaticFriction) {
+// Draw 6 at the default band: its log holds no break-away and the fit no LuGre shape. Fits
+// with fs 0.556 and 21 (truth 0.763) were about equally good, the Stribeck speed ran to the top
+// of its range, and `stick_slip` had been named with fs 27 % low, its errors saying determined.
+// Now: the static friction of its level, Coulomb's fc within 20 % of LuGre's, and
+// `stick_slip` on that joint in `not_tried` with why.
+TEST(DiagnoseBeyond, LuGreWhoseStribeckSpeedRunsOutOfRangeIsItsStaticFriction) {
   const auto dir = test::temp_dir("lugre26");
-  for (int s : {2, 6}) {
-    const Draw d = make_draw(dir, "lugre", s, 0, Measurement{});
-    const auto r = run_draw(dir, d, s);
-    const std::string joint = "j" + std::to_string(d.joint);
-    std::cout << d.what << " on " << joint << ": named " << joined(named(r)) << "\n  not tried " << r["not_tried"].dump() << "\n";
-    bool coulomb = false, said = false;
+  const int s = 6;
+  const Draw d = make_draw(dir, "lugre", s, 0, Measurement{});
+  const auto r = run_draw(dir, d, s);
+  const std::string joint = "j" + std::to_string(d.joint);
+  std::cout << d.what << " on " << joint << ": named " << joined(named(r)) << "\n  not tried " << r["not_tried"].dump() << "\n";
+  bool coulomb = false, said = false;
+  for (const auto& cause : r["causes"])
+    if (!cause.contains("superseded_by") && cause["effect"] == "coulomb" && cause["joints"][0] == joint) {
+      coulomb = true;
+      EXPECT_NEAR(cause["params"][joint + ".fc"].get<double>(), d.fc, 0.2 * d.fc);
+    }
+  for (const auto& n : r["not_tried"])
+    said = said || (n["effect"] == "stick_slip" && n.value("joint", "") == joint &&
+                    n["reason"].get<std::string>().find("a static friction") != std::string::npos);
+  EXPECT_TRUE(coulomb) << joined(named(r));
+  EXPECT_TRUE(said) << r["not_tried"].dump();
+}
+
+// Draws 2 and 15 at the default band: the reversals are too fast for the bristles to climb the
+// Stribeck hump, and equally good fits leave fs, vs and the bristles' sigma0 and sigma1 each
+// 50 % apart. They had `coulomb` named (a stateful fit with no shape key determined was taken
+// for its levels), whose written model left 27 and 30 % of the model as given's held-out
+// relative error on the joint; LuGre, fitted as well as the data allow, leaves 4.8 and 7.2 %.
+// Now `stick_slip`, fc within 20 %, fs reported not identifiable, and the written model under
+// a tenth of the model as given's error, which no static friction reaches on these draws.
+TEST(DiagnoseBeyond, LuGreWithoutBreakAwayInItsLogIsNamedWithFsNotIdentifiable) {
+  const auto dir = test::temp_dir("lugre_nobreak");
+  for (int s : {2, 15}) {
+    const auto r = expect_stick_slip(dir, s, 0, BreakAway::said_free);
     for (const auto& cause : r["causes"])
-      if (!cause.contains("superseded_by") && cause["effect"] == "coulomb" && cause["joints"][0] == joint) {
-        coulomb = true;
-        EXPECT_NEAR(cause["params"][joint + ".fc"].get<double>(), d.fc, 0.2 * d.fc);
+      if (cause["effect"] == "stick_slip") {
+        const std::string joint = cause["joints"][0];
+        EXPECT_LT(r["final"]["rel_error_test"][joint].get<double>(), 0.1 * r["baseline"]["rel_error_test"][joint].get<double>()) << joint;
       }
-    for (const auto& n : r["not_tried"])
-      said = said || (n["effect"] == "stick_slip" && n.value("joint", "") == joint &&
-                      n["reason"].get<std::string>().find("a static friction") != std::string::npos);
-    EXPECT_TRUE(coulomb) << joined(named(r));
-    EXPECT_TRUE(said) << r["not_tried"].dump();
   }
 }
 
@@ -586,7 +626,7 @@ TEST(DiagnoseBeyond, DISABLED_SeedTable) {
     const auto r = run_draw(dir, d, s);
     std::cout << "TABLE " << kind << " seed " << s << " joint j" << d.joint << " other j" << d.other << " (" << d.what << "): delay "
               << 1e3 * r["delay"]["seconds"].get<double>() << " ± " << 1e3 * r["delay"]["stderr"].get<double>() << " ms named "
-              << r["delay"]["named"] << "; causes " << joined(named(r)) << "\n";
+              << r["delay"]["named"] << "; causes " << joined(named(r)) << "\n   delay: " << r["delay"]["why"].get<std::string>() << "\n";
     for (const auto& cause : r["causes"])
       std::cout << "   cause " << cause["effect"] << " " << cause["joints"].dump() << " " << cause.value("params", nlohmann::json()).dump()
                 << (cause.contains("superseded_by") ? " superseded" : "")
@@ -594,7 +634,11 @@ TEST(DiagnoseBeyond, DISABLED_SeedTable) {
     for (const auto& u : r["unexplained"])
       std::cout << "   unexplained " << u["joint"] << " top " << u["inputs"][0] << " share " << u["share"] << " explained_rmse "
                 << std::sqrt(std::pow(u["rmse_test"].get<double>(), 2) - std::pow(u["rmse_test_with_gp"].get<double>(), 2)) << " noise_rmse " << u["noise_rmse"] << "\n";
-    std::cout << "   rollout worse_on " << r["rollout"]["worse_on"].dump() << "\n";
+    for (const auto& t : r["not_tried"])
+      if (t.value("joint", "") == "j" + std::to_string(d.joint) && t.value("effect", "") == "stick_slip")
+        std::cout << "   not tried " << t["reason"] << "\n";
+    std::cout << "   rollout worse_on " << r["rollout"]["worse_on"].dump() << "; held-out relative error on j" << d.joint << " "
+              << r["baseline"]["rel_error_test"]["j" + std::to_string(d.joint)] << " as given, " << r["final"]["rel_error_test"]["j" + std::to_string(d.joint)] << " written\n";
   }
 }
 

@@ -120,7 +120,7 @@ BlockColumns Diagnosis::coulomb_nuisance(const SplitData& s) const {
 }
 
 // The delay search's nuisance on a split: coulomb_nuisance, and the columns of the causes in
-// offset_beside_ (refine_logger_offset: the stateful causes chosen).
+// offset_beside_ (offset_beside: the stateful causes chosen).
 std::vector<BlockColumns> Diagnosis::delay_nuisance(const SplitData& s) const {
   std::vector<BlockColumns> out{coulomb_nuisance(s)};
   for (int k : offset_beside_) out.push_back(columns_of(cands_[static_cast<size_t>(k)], s));
@@ -284,42 +284,35 @@ void Diagnosis::delay_decide(double d, const std::function<Eigen::VectorXd(doubl
   notes_.push_back(delay_.note);
 }
 
-// The logger's offset again, once causes are chosen and no delay is named: with the chosen
-// stateful causes' simulated forces beside the search's static nuisance. LuGre's bristles lag
-// the velocity, a lag a constant, sign(qd) and directional viscous columns do not hold, and the
-// offset read beside them went astray (0.86 +- 0.55 ms, not resolved, where the logger's half
-// tick is about -0.3 ms): left in, the half tick read the inertias' torque as damping (0.485
-// to 0.496 for 0.5 on joints without friction) and `parameters` was named beside `stick_slip`
-// on 6 of 24 default-band LuGre draws. The data go back to as measured and the offset is
-// searched again; only a resolved logger's offset (what estimate_delay corrects without a
-// name) is taken, else the first estimate stands. Returns whether the correction changed: the
-// causes must then be chosen again on the data corrected anew; `first` gets the first
-// estimate, for select() to put back (swap_delay, delay_ = first, swap_delay).
-bool Diagnosis::refine_logger_offset(const std::vector<int>& kept, DelayResult& first) {
-  if (delay_.named || delay_.withheld || filter_plan_.raw_differences || uniform_step(fit_) <= 0 || uniform_step(test_) <= 0) return false;
-  std::vector<int> stateful;
-  for (int k : kept)
-    if (cands_[static_cast<size_t>(k)].stateful) stateful.push_back(k);
-  if (stateful.empty()) return false;
+// The offset again, once causes are chosen and `stateful` (LuGre's) among them: with their
+// simulated forces beside the search's static nuisance (select() says why). The data go back
+// to as measured and the offset is searched and decided anew - named, corrected as the
+// logger's offset, or neither - and the data left as that estimate leaves them. Returns
+// whether it differs from the first: in what it is, or, named or corrected both times, by more
+// than two of its standard errors. `first` gets the first estimate, for select() to put back
+// (swap_delay, delay_ = first, swap_delay); when it does not differ it is put back here.
+bool Diagnosis::offset_beside(const std::vector<int>& stateful, DelayResult& first) {
+  if (delay_.withheld || filter_plan_.raw_differences || uniform_step(fit_) <= 0 || uniform_step(test_) <= 0) return false;
   swap_delay();   // as measured (nothing to swap when the first estimate corrected nothing) ...
   first = delay_;   // ... its `other` now holds the first correction's data
   delay_ = DelayResult{};
   offset_beside_ = stateful;
   estimate_delay();
   offset_beside_.clear();
-  const bool taken = delay_.corrected && !delay_.named;
-  if (!taken) {
-    swap_delay();   // a named delay beside them is not this stage's to name: back to as measured
-    if (delay_.named) notes_.erase(std::remove(notes_.begin(), notes_.end(), delay_.note), notes_.end());
+  const bool moved = delay_.named || delay_.corrected;
+  const bool same = delay_.named == first.named && delay_.corrected == first.corrected &&
+                    (!moved || std::fabs(delay_.seconds - first.seconds) <= 2 * delay_.stderr_);
+  if (same) {
+    swap_delay();   // back to as measured
     delay_ = first;
     swap_delay();   // and to the first estimate's correction
     return false;
   }
   std::string beside;
   for (int k : stateful) beside += (beside.empty() ? "" : ", ") + std::string(cands_[static_cast<size_t>(k)].plugin->name) + " on " + cands_[static_cast<size_t>(k)].joint_name;
-  delay_.why += " (searched again beside the stateful causes first chosen - " + beside + " - whose lag the static nuisance does not hold; " +
-                (first.corrected ? "first estimate " + fmt(first.seconds) + " s" : "first estimate " + fmt(first.seconds) + " +- " + fmt(first.stderr_, 2) + " s, not corrected") +
-                "; the causes were then chosen again)";
+  const std::string how = first.named ? "named" : first.corrected ? "corrected" : "not corrected";
+  delay_.why += " (searched again beside the stateful causes first chosen - " + beside + " - whose lag the static nuisance does not hold; first estimate " +
+                fmt(first.seconds) + " +- " + fmt(first.stderr_, 2) + " s, " + how + "; the causes were then chosen again)";
   return true;
 }
 

@@ -85,7 +85,7 @@ struct Candidate {
   bool stateful = false;
   std::vector<double> stateful_se;            // per shape key, absolute
   std::vector<std::string> not_identifiable;  // keys with a relative standard error above 50 %, or that far apart between equally good fits
-  bool profiled = false;                      // shape_holds ran
+  bool profiled = false;                      // profile_once ran
 };
 
 bool is_stateful(const spml_force_plugin& p);   // #22: advance/reset and no regressor
@@ -270,7 +270,8 @@ class Diagnosis {
   Eigen::VectorXd net_of_frictionloss(const SplitData& s) const;
   BlockColumns coulomb_nuisance(const SplitData& s) const;
   std::vector<BlockColumns> delay_nuisance(const SplitData& s) const;
-  bool refine_logger_offset(const std::vector<int>& kept, DelayResult& first);
+  bool offset_beside(const std::vector<int>& stateful, DelayResult& first);
+  void choose(const Selection& fresh);
   Selection choose_again(const Selection& fresh);
   void restore(Selection&& s);
   void swap_delay();
@@ -294,10 +295,13 @@ class Diagnosis {
                                  const std::vector<double>& ub, const std::vector<double>& x) const;
   int stateful_rival(int accepted, const std::vector<int>& order, const std::vector<int>& chosen, Fit& next, Eigen::VectorXd& next_test);
   void settle_levels(Candidate& c, const Fit& current, const std::vector<bool>& level, std::vector<double>& x);
-  bool shaped(const Candidate& c) const;
   bool is_level(const spml_shape_param* sp) const;
   StatefulSpace stateful_space(const Candidate& c) const;
-  bool shape_holds(int k, const Fit& current);
+  void profile_once(int k, const Fit& current);
+  bool shaped(const Candidate& c) const;
+  bool beats_static(const Candidate& c, double bar, double rss) const;
+  double static_bar(int joint, const std::vector<int>& order, const std::vector<int>& chosen, const Fit& before, const std::vector<int>& outs,
+                    double bar) const;
   void stateful_errors(Candidate& c, const Fit& current, const std::vector<double>& x) const;
   void stateful_report(const Candidate& c, double amplitude, nlohmann::json& params, nlohmann::json& se, nlohmann::json& j) const;
   Eigen::VectorXd written_stateful(const SplitData& s, const mjModel* ext) const;
@@ -343,7 +347,7 @@ class Diagnosis {
   std::vector<std::string> notes_;
   FilterPlan filter_plan_;
   DelayResult delay_;   // #22
-  std::vector<int> offset_beside_;   // #22: causes beside the delay search's nuisance (refine_logger_offset)
+  std::vector<int> offset_beside_;   // #22: causes beside the delay search's nuisance (offset_beside)
   mutable std::optional<bool> degrees_;   // the model file's hinge angles in degrees (written_form.cc)
   mutable std::optional<std::vector<std::string>> defined_joints_;   // the joints the model file itself defines (written_form.cc)
   mutable std::shared_ptr<mjData> sim_data_;   // #22: the state the stateful simulations read (one thread)

@@ -9,13 +9,13 @@
 // the plugin requires (shape keys within their declared ranges, the others within a factor
 // 1000 of a common level found by a scan), by NLopt's subplex. The fitted force then enters
 // the selection as a candidate of one column (its amplitude free, near 1 at the fit) whose
-// evidence counts every fitted key, so it is compared with the static candidates on the same
-// held-out test. Standard errors: Gauss-Newton in the logarithms, autocorrelation-inflated;
-// a key whose relative standard error exceeds 50 % is reported not identifiable (a LuGre
-// bristle stiffness sigma0 when the data hold no resolved pre-sliding), and so is one that
-// fits the data do not tell apart leave 50 % apart (profile_stateful, for a candidate about to
-// join). A fit whose shape keys are none determined, or one at the end of its range, is its
-// levels: a static friction, not this effect.
+// evidence counts every fitted key, and it joins only by beating every static candidate on
+// its joint on the same held-out test (static_bar, beats_static). Standard errors: Gauss-Newton in the
+// logarithms, autocorrelation-inflated; a key whose relative standard error exceeds 50 % is
+// reported not identifiable (a LuGre bristle stiffness sigma0 when the data hold no resolved
+// pre-sliding), and so is one that fits the data do not tell apart leave 50 % apart
+// (profile_stateful, for a candidate about to join). A fit with a shape key at the end of its
+// range, or levels the data do not determine, is not this effect.
 #include <nlopt.hpp>
 
 #include <Eigen/Dense>
@@ -36,6 +36,7 @@ constexpr double kPolishRows = 8000;       // ... up to this many rows per joint
 constexpr int kProfileCells = 5;           // profile_stateful: points per shape key (cell centres of its log range) ...
 constexpr int kProfileEvalsPerKey = 100;   // ... each polished this long over the other keys
 constexpr double kProfileChi2 = 3.84;      // a profile point the data do not reject: chi-square(1) at 95 %
+constexpr double kUnshapedGain = 0.1;      // beats_static: the held-out gain over the static frictions of a fit with no shape key determined
 
 }  // namespace
 
@@ -422,7 +423,7 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
   for (size_t k = 0; k < ns; ++k) {
     if (!level[k] || !zero_allowed(k) || c.stateful_se[k] <= kNotIdentifiable * c.shape_values[k]) continue;
     std::vector<double> zeroed = x;
-    zeroed[k] = std::log(1e-300);
+    zeroed[k] = -std::numeric_limits<double>::infinity();   // exactly 0: 1e-300 passed LuGre's fc > 0, and fc was declared 0
     const double dz = stateful_drop(c, current, zeroed);
     if (!std::isfinite(dz)) continue;   // the plugin refuses the level at 0 (LuGre's fc)
     const bool free = !std::isfinite(c.stateful_se[k]);
@@ -448,13 +449,12 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
                                          ") are not determined by the data: not this effect"}});
     return;
   }
-  // Nor is it when a shape key ran to the end of its declared range (the data push it beyond
-  // the effect's physics, not onto it), or when none of them is determined (LuGre's vs, sigma0,
-  // sigma1: its Stribeck curve and its bristles; shape_holds asks the profile too): what the
-  // data show of it is its levels, a static friction. A hidden Coulomb friction under a
-  // controller was named `stick_slip` with sigma1 at the top of its range (100): a damping at
-  // the reversals in place of the stick phases that the data's low-pass rounded off; another,
-  // with sigma0 1.7e5 +- 4.7e5, vs 1.3 +- 1.0, sigma1 6.7 +- 3.7 and fs = fc + 3 %.
+  // Nor is it when a shape key ran to the end of its declared range: the data push it beyond
+  // the effect's physics, not onto it. A hidden Coulomb friction under a controller was named
+  // `stick_slip` with sigma1 at the top of its range (100): a damping at the reversals in place
+  // of the stick phases that the data's low-pass rounded off. (Shape keys that are merely not
+  // determined do not reject it: the held-out comparison with the static candidates decides,
+  // static_bar.)
   std::string at_end;
   const StatefulSpace box = stateful_space(c);
   for (size_t k = 0; k < ns; ++k) {
@@ -462,14 +462,12 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
     const double v = std::log(std::max(c.shape_values[k], 1e-300));
     if (!level[k] && (v <= box.lb[k] + 1e-3 || v >= box.ub[k] - 1e-3)) at_end += std::string(at_end.empty() ? "" : ", ") + c.shape[k]->key;
   }
-  if (!at_end.empty() || !shaped(c)) {
+  if (!at_end.empty()) {
     c.skipped = true;
     c.searched = true;
     not_tried_.push_back({{"effect", c.plugin->name}, {"joint", c.joint_name},
-                          {"reason", "fitted by simulation, but " +
-                                         (at_end.empty() ? std::string("none of its shape keys is determined by the data")
-                                                         : "its " + at_end + " ran to the end of the declared range") +
-                                         ": what the data show of it is its levels, a static friction"}});
+                          {"reason", "fitted by simulation, but its " + at_end +
+                                         " ran to the end of the declared range: what the data show of it is its levels, a static friction"}});
     return;
   }
   PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
@@ -478,22 +476,13 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
   c.searched = true;
 }
 
-// Is one of the candidate's shape keys determined (not in not_identifiable)?
-bool Diagnosis::shaped(const Candidate& c) const {
-  for (size_t k = 0; k < c.shape.size(); ++k) {
-    if (!is_level(c.shape[k]) && std::find(c.not_identifiable.begin(), c.not_identifiable.end(), c.shape[k]->key) == c.not_identifiable.end()) return true;
-  }
-  return false;
-}
-
 // A stateful candidate about to join (the forward step, or the held-out comparison with the
 // static candidates) is profiled first, once (profile_stateful, against `current`): the keys
-// equally good fits leave apart join its not_identifiable, and when no shape key is left
-// determined it is not that effect (settle_levels' rule). Only then: profiling every joint's
+// equally good fits leave apart join its not_identifiable. Only then: profiling every joint's
 // fit tripled the arm's diagnose and the undecimated Panda's, where LuGre joins nowhere.
-bool Diagnosis::shape_holds(int k, const Fit& current) {
+void Diagnosis::profile_once(int k, const Fit& current) {
   Candidate& c = cands_[static_cast<size_t>(k)];
-  if (c.profiled) return !c.skipped;
+  if (c.profiled) return;
   c.profiled = true;
   const auto [lb, ub, level] = stateful_space(c);
   std::vector<double> x(c.shape.size());
@@ -501,12 +490,52 @@ bool Diagnosis::shape_holds(int k, const Fit& current) {
     x[k2] = std::clamp(std::log(std::max(c.shape_values[k2], 1e-300)), lb[k2], ub[k2]);   // a level declared 0 sits at its floor
   for (const auto& key : profile_stateful(c, current, level, lb, ub, x))
     if (std::find(c.not_identifiable.begin(), c.not_identifiable.end(), key) == c.not_identifiable.end()) c.not_identifiable.push_back(key);
-  if (shaped(c)) return true;
-  c.skipped = true;
-  not_tried_.push_back({{"effect", c.plugin->name}, {"joint", c.joint_name},
-                        {"reason", "fitted by simulation, but none of its shape keys is determined by the data (equally good fits leave "
-                                   "them apart by half): what the data show of it is its levels, a static friction"}});
+}
+
+// Is one of the candidate's shape keys determined (not in not_identifiable)?
+bool Diagnosis::shaped(const Candidate& c) const {
+  for (size_t k = 0; k < c.shape.size(); ++k)
+    if (!is_level(c.shape[k]) && std::find(c.not_identifiable.begin(), c.not_identifiable.end(), c.shape[k]->key) == c.not_identifiable.end())
+      return true;
   return false;
+}
+
+// Does profiled stateful candidate `c`, of held-out residual `rss`, beat the static `bar`? By
+// min_gain when one of its shape keys is determined; when none is, by a tenth (kUnshapedGain),
+// as a delay must: such a fit can dress a static friction. A hidden Coulomb friction through
+// the 10 Hz import (DiagnoseRealistic.CleanDrawsNameNothingAndFilteredCoulombIsCoulomb) had
+// LuGre with fs = fc + 3 %, sigma1 6.7 and sigma0 1.7e5, every shape key loose, beat Coulomb by
+// 2.2 % held out, in the reversals the low-pass rounds off; where LuGre's break-away and
+// bristles are loose but real (draws 2, 15, 28: static_bar) it leaves a fifteenth to a thirtieth of
+// Coulomb's held-out residual.
+bool Diagnosis::beats_static(const Candidate& c, double bar, double rss) const {
+  return gains_on_test(bar, rss, shaped(c) ? opt_.min_gain : std::max(opt_.min_gain, kUnshapedGain), rss_floor(test_.b));
+}
+
+// The held-out residual sum of squares (over `outs`, the joint's outputs) of the best static
+// candidate on `joint` in `order` that would join there - in place of the chosen causes it
+// nests, its parameters accepted by the plugin, its evidence holding against `before` - or
+// `bar` when none does better. A stateful candidate joins only by beating it (beats_static;
+// in the forward step, and in stateful_rival when a static one is about to join): its fit is
+// judged by what it predicts beyond the static frictions, not by whether each of its shape
+// keys is determined. Where the reversals are too fast for the bristles to climb the Stribeck
+// hump, LuGre's break-away and its bristles are each left loose by the data (draws 2, 15 and
+// 28 of the default band): rejected for that, `coulomb` was named, whose written model left
+// 0.018, 0.027 and 0.011 of the joint's held-out relative error where LuGre's leaves 0.0032,
+// 0.0065 and 0.0028; the loose keys are reported not identifiable. Held to the bar in the
+// forward step too, a hidden Stribeck curve of RealisticDraws (set 4, level 0, draw 4, raw
+// differences) is no longer `stick_slip`.
+double Diagnosis::static_bar(int joint, const std::vector<int>& order, const std::vector<int>& chosen, const Fit& before,
+                             const std::vector<int>& outs, double bar) const {
+  for (int k : order) {
+    const Candidate& c = cands_[static_cast<size_t>(k)];
+    if (c.stateful || c.joint != joint) continue;
+    const std::vector<int> trial = in_place(k, chosen);
+    const Fit f = refit(trial, true);
+    if (!refused(k, f.coef.tail(c.fit_cols.cols), refitted_damping(c.joint, f)).empty() || !evidence_holds(k, before, f)) continue;
+    bar = std::min(bar, rss_on(residual_on(test_, trial, true, f), outs, test_.N));
+  }
+  return bar;
 }
 
 // The held-out comparison: a static cause about to join on a joint where a stateful candidate
@@ -528,16 +557,7 @@ int Diagnosis::stateful_rival(int accepted, const std::vector<int>& order, const
   const auto outs = outputs_of(accepted);
   const Fit before = refit(chosen, true);
   // The static bar: the accepted cause, or a static one on its joint that does better.
-  double bar = rss_on(next_test, outs, test_.N);
-  for (int k : order) {
-    const Candidate& c = cands_[static_cast<size_t>(k)];
-    if (c.stateful || c.joint != a.joint || k == accepted) continue;
-    const std::vector<int> trial = in_place(k, chosen);
-    const Fit f = refit(trial, true);
-    if (!refused(k, f.coef.tail(c.fit_cols.cols), refitted_damping(c.joint, f)).empty() || !evidence_holds(k, before, f)) continue;
-    bar = std::min(bar, rss_on(residual_on(test_, trial, true, f), outs, test_.N));
-  }
-  double best = bar;
+  double best = static_bar(a.joint, order, chosen, before, outs, rss_on(next_test, outs, test_.N));
   int out = accepted;
   for (int k : order) {
     const Candidate& c = cands_[static_cast<size_t>(k)];
@@ -547,7 +567,9 @@ int Diagnosis::stateful_rival(int accepted, const std::vector<int>& order, const
     if (!refused(k, f.coef.tail(c.fit_cols.cols)).empty() || !evidence_holds(k, before, f)) continue;
     Eigen::VectorXd rt = residual_on(test_, trial, true, f);
     const double rss = rss_on(rt, outs, test_.N);
-    if (gains_on_test(best, rss, opt_.min_gain, rss_floor(test_.b)) && shape_holds(k, before)) {
+    if (!gains_on_test(best, rss, opt_.min_gain, rss_floor(test_.b))) continue;
+    profile_once(k, before);
+    if (beats_static(c, best, rss)) {
       best = rss;
       out = k;
       next = std::move(f);
