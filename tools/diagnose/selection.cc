@@ -200,7 +200,10 @@ void Diagnosis::forward_backward() {
       if (!gains_on_test(rss_on(r_test, outs, test_.N), rss, opt_.min_gain, rss_floor(test_.b))) continue;
       if (const Candidate& c = cands_[static_cast<size_t>(order[i])]; c.stateful) {
         // #22: only beyond the static frictions on its joint, held out (stateful_fit.cc)
-        const double bar = static_bar(c.joint, order, chosen, current, outs, std::numeric_limits<double>::infinity());
+        // A static friction it nests that is already chosen (Coulomb) is in the bar too: it is the current fit.
+        const bool replaces = in_place(order[i], chosen).size() <= chosen.size();
+        const double bar = static_bar(c.joint, order, chosen, current, outs,
+                                      replaces ? rss_on(r_test, outs, test_.N) : std::numeric_limits<double>::infinity());
         if (std::isfinite(bar) && !gains_on_test(bar, rss, opt_.min_gain, rss_floor(test_.b))) continue;
         profile_once(order[i], current);
         if (std::isfinite(bar) && !beats_static(c, bar, rss)) continue;
