@@ -357,26 +357,6 @@ TEST(DiagnoseBeyond, DelayIsFoundBesideStaticFriction) {
   }
 }
 
-// A Coulomb friction (draw 13 of kind delay_coulomb, the torques not delayed) must not be
-// dressed as LuGre: `stick_slip` had been named in its place, fs = fc + 5 %, a Stribeck speed
-// of 1.1 rad/s and the bristle stiffness sigma0 at 0.986 of the top of its range, where the
-// polish had stopped short of the end on a flat objective (a key within 5 % of an end is at
-// it now). Coulomb's fc within 5 %, and nothing else named.
-TEST(DiagnoseBeyond, CoulombFrictionIsNotDressedAsLuGre) {
-  const auto dir = test::temp_dir("coulomb_not_lugre");
-  const int s = 13;
-  const Draw d = make_draw(dir, "delay_coulomb", s, 0, Measurement{});
-  const auto r = run_draw(dir, d, s);
-  const std::string joint = "j" + std::to_string(d.other);
-  std::cout << d.what << ": named " << joined(named(r)) << "\n";
-  ASSERT_EQ(joined(named(r)), "coulomb@" + joint);
-  for (const auto& cause : r["causes"])
-    if (cause["effect"] == "coulomb") {
-      const double fc = std::stod(d.what.substr(d.what.find("fc=") + 3));
-      EXPECT_NEAR(cause["params"][joint + ".fc"].get<double>(), fc, 0.05 * fc);
-    }
-}
-
 // What a LuGre draw's report must say of its break-away force fs.
 enum class BreakAway {
   within_20_percent,       // the log holds break-away: fs within 20 % and determined

@@ -36,7 +36,7 @@ constexpr double kPolishRows = 8000;       // ... up to this many rows per joint
 constexpr int kProfileCells = 5;           // profile_stateful: points per shape key (cell centres of its log range) ...
 constexpr int kProfileEvalsPerKey = 100;   // ... each polished this long over the other keys
 constexpr double kProfileChi2 = 3.84;      // a profile point the data do not reject: chi-square(1) at 95 %
-constexpr double kEndMargin = 0.05;         // settle_levels: a shape key this close (in the logarithm) to an end of its range is at it
+constexpr double kEndMargin = 1e-3;         // settle_levels: a shape key this close (in the logarithm) to an end of its range is at it
 constexpr double kUnshapedGain = 0.1;      // beats_static: the held-out gain over the static frictions of a fit with no shape key determined
 
 }  // namespace
@@ -459,9 +459,9 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
   std::string at_end;
   const StatefulSpace box = stateful_space(c);
   for (size_t k = 0; k < ns; ++k) {
-    // Within 5 % of an end: where the objective flattens out toward an end the polish stops
-    // short of it (a hidden Coulomb friction, delay_coulomb draw 13, had `stick_slip` named
-    // with sigma0 at 0.978, 0.986 and 0.997 of its top, 1e6, and fs = fc + 5 %).
+    // Within the polish's tolerance (1e-4 in the logarithm) of an end, with a margin. (A
+    // margin of 5 % rejected the true Stribeck speed of friction experiment 21, 0.966 of the
+    // top of its range.)
     const double v = std::log(std::max(c.shape_values[k], 1e-300));
     if (!level[k] && (v <= box.lb[k] + kEndMargin || v >= box.ub[k] - kEndMargin)) at_end += std::string(at_end.empty() ? "" : ", ") + c.shape[k]->key;
   }
