@@ -452,8 +452,9 @@ TEST(DiagnoseBeyond, TheLoggersHalfTickIsFoundBesideLuGre) {
 // friction beside the shift, read draws 5 and 7 as 5.87 +- 0.57 and 5.08 +- 0.24 ms, and on
 // data so corrected the inertias' torque was read as damping and `parameters` was named beside
 // `stick_slip`. Searched again beside the LuGre force chosen (offset_beside) they read 4.73 ms,
-// like a delay alone (4.6-4.8 ms: the torque held over each tick), and the causes chosen again
-// are the delay and `stick_slip` on its joint.
+// like a delay alone (4.6-4.8 ms: the torque held over each tick); named both times, the
+// causes chosen stand, and on the data corrected anew they are the delay and `stick_slip` on
+// its joint alone (`parameters` is decided there).
 TEST(DiagnoseBeyond, ADelayBesideLuGreIsSearchedAgainBesideIt) {
   const auto dir = test::temp_dir("lugre_delay");
   for (int s : {5, 7}) {

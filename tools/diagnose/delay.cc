@@ -287,12 +287,13 @@ void Diagnosis::delay_decide(double d, const std::function<Eigen::VectorXd(doubl
 // The offset again, once causes are chosen and `stateful` (LuGre's) among them: with their
 // simulated forces beside the search's static nuisance (select() says why). The data go back
 // to as measured and the offset is searched and decided anew - named, corrected as the
-// logger's offset, or neither - and the data left as that estimate leaves them. Returns
-// whether it differs from the first: in what it is, or, named or corrected both times, by more
-// than two of its standard errors. `first` gets the first estimate, for select() to put back
-// (swap_delay, delay_ = first, swap_delay); when it does not differ it is put back here.
-bool Diagnosis::offset_beside(const std::vector<int>& stateful, DelayResult& first) {
-  if (delay_.withheld || filter_plan_.raw_differences || uniform_step(fit_) <= 0 || uniform_step(test_) <= 0) return false;
+// logger's offset, or neither - and the data left as that estimate leaves them. `same` when
+// it does not differ from the first (in what it is, or, named or corrected both times, by more
+// than two of its standard errors): the first is put back here. `refined` when a delay is named
+// both times, `changed` otherwise; `first` gets the first estimate, for select() to put back
+// (swap_delay, delay_ = first, swap_delay).
+OffsetBeside Diagnosis::offset_beside(const std::vector<int>& stateful, DelayResult& first) {
+  if (delay_.withheld || filter_plan_.raw_differences || uniform_step(fit_) <= 0 || uniform_step(test_) <= 0) return OffsetBeside::same;
   swap_delay();   // as measured (nothing to swap when the first estimate corrected nothing) ...
   first = delay_;   // ... its `other` now holds the first correction's data
   delay_ = DelayResult{};
@@ -306,14 +307,16 @@ bool Diagnosis::offset_beside(const std::vector<int>& stateful, DelayResult& fir
     swap_delay();   // back to as measured
     delay_ = first;
     swap_delay();   // and to the first estimate's correction
-    return false;
+    return OffsetBeside::same;
   }
+  const OffsetBeside out = first.named && delay_.named ? OffsetBeside::refined : OffsetBeside::changed;
   std::string beside;
   for (int k : stateful) beside += (beside.empty() ? "" : ", ") + std::string(cands_[static_cast<size_t>(k)].plugin->name) + " on " + cands_[static_cast<size_t>(k)].joint_name;
   const std::string how = first.named ? "named" : first.corrected ? "corrected" : "not corrected";
   delay_.why += " (searched again beside the stateful causes first chosen - " + beside + " - whose lag the static nuisance does not hold; first estimate " +
-                fmt(first.seconds) + " +- " + fmt(first.stderr_, 2) + " s, " + how + "; the causes were then chosen again)";
-  return true;
+                fmt(first.seconds) + " +- " + fmt(first.stderr_, 2) + " s, " + how +
+                (out == OffsetBeside::refined ? "; the causes chosen stand)" : "; the causes were then chosen again)");
+  return out;
 }
 
 // The data on the other side of the correction: as measured while corrected, and back.

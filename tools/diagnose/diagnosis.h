@@ -137,6 +137,11 @@ struct Selection {
   nlohmann::json not_tried;
 };
 
+// What the offset searched again beside the chosen stateful causes is (offset_beside): the
+// first estimate (put back), the same named delay better estimated (the causes stand), or
+// another kind of offset (the causes are chosen again).
+enum class OffsetBeside { same, refined, changed };
+
 // The parameters extended.xml states when `parameters` is named (written_parameters.cc).
 struct WrittenParameters {
   ConsistentIdentification id;      // standard parameters; id.extra: the kept effects' coefficients
@@ -270,8 +275,9 @@ class Diagnosis {
   Eigen::VectorXd net_of_frictionloss(const SplitData& s) const;
   BlockColumns coulomb_nuisance(const SplitData& s) const;
   std::vector<BlockColumns> delay_nuisance(const SplitData& s) const;
-  bool offset_beside(const std::vector<int>& stateful, DelayResult& first);
+  OffsetBeside offset_beside(const std::vector<int>& stateful, DelayResult& first);
   void choose(const Selection& fresh);
+  Selection set_aside(const Selection& fresh);
   Selection choose_again(const Selection& fresh);
   void restore(Selection&& s);
   void swap_delay();
@@ -301,7 +307,7 @@ class Diagnosis {
   bool shaped(const Candidate& c) const;
   bool beats_static(const Candidate& c, double bar, double rss) const;
   double static_bar(int joint, const std::vector<int>& order, const std::vector<int>& chosen, const Fit& before, const std::vector<int>& outs,
-                    double bar) const;
+                    double bar, int except = -1) const;
   void stateful_errors(Candidate& c, const Fit& current, const std::vector<double>& x) const;
   void stateful_report(const Candidate& c, double amplitude, nlohmann::json& params, nlohmann::json& se, nlohmann::json& j) const;
   Eigen::VectorXd written_stateful(const SplitData& s, const mjModel* ext) const;

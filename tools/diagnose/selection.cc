@@ -95,9 +95,9 @@ void Diagnosis::select() {
   const std::vector<std::string> notes_first = notes_;
   notes_ = notes_before;
   DelayResult first;
-  const bool again = offset_beside(stateful, first);
+  const OffsetBeside beside = offset_beside(stateful, first);
   result_.timings.search += since(t_delay);
-  if (!again) {
+  if (beside == OffsetBeside::same) {
     notes_ = notes_first;
     return;
   }
@@ -105,9 +105,8 @@ void Diagnosis::select() {
   // columns are of the states, which the correction leaves alone) and are refitted on the data
   // it leaves where that counts - whether `parameters` is named, the report. Chosen again,
   // the arm's delay + LuGre bench took 19.9 s against the 10.
-  if (first.named && delay_.named) return;
-  Selection made{std::move(cands_), std::move(causes_), std::move(not_tried_)};
-  restore(Selection(fresh));
+  if (beside == OffsetBeside::refined) return;
+  Selection made = set_aside(fresh);
   choose(fresh);
   const std::vector<int> kept_again = kept_effects();
   for (int k : stateful)
@@ -148,11 +147,17 @@ void Diagnosis::choose(const Selection& fresh) {
   restore(std::move(corrected));
 }
 
-// The selection made so far, set aside, and the causes chosen again from `fresh` (select():
-// on the data as measured, or corrected anew).
-Selection Diagnosis::choose_again(const Selection& fresh) {
+// The selection made so far, set aside (returned), and `fresh` in its place.
+Selection Diagnosis::set_aside(const Selection& fresh) {
   Selection made{std::move(cands_), std::move(causes_), std::move(not_tried_)};
   restore(Selection(fresh));
+  return made;
+}
+
+// The selection made so far, set aside, and the causes chosen again from `fresh` (choose(): on
+// the data as measured).
+Selection Diagnosis::choose_again(const Selection& fresh) {
+  Selection made = set_aside(fresh);
   forward_backward();
   return made;
 }
@@ -209,7 +214,7 @@ void Diagnosis::forward_backward() {
         const bool replaces = in_place(order[i], chosen).size() <= chosen.size();
         const double bar = static_bar(c.joint, order, chosen, current, outs,
                                       replaces ? rss_on(r_test, outs, test_.N) : std::numeric_limits<double>::infinity());
-        if (std::isfinite(bar) && !gains_on_test(bar, rss, opt_.min_gain, rss_floor(test_.b))) continue;
+        if (std::isfinite(bar) && !gains_on_test(bar, rss, opt_.min_gain, rss_floor(test_.b))) continue;   // beats_static's least bar, before the costly profile
         profile_once(order[i], current);
         if (std::isfinite(bar) && !beats_static(c, bar, rss)) continue;
       }

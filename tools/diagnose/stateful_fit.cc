@@ -518,7 +518,7 @@ bool Diagnosis::beats_static(const Candidate& c, double bar, double rss) const {
 // The held-out residual sum of squares (over `outs`, the joint's outputs) of the best static
 // candidate on `joint` in `order` that would join there - in place of the chosen causes it
 // nests, its parameters accepted by the plugin, its evidence holding against `before` - or
-// `bar` when none does better. A stateful candidate joins only by beating it (beats_static;
+// `bar` when none does better; `except`, whose residual `bar` already is, is not refitted. A stateful candidate joins only by beating it (beats_static;
 // in the forward step, and in stateful_rival when a static one is about to join): its fit is
 // judged by what it predicts beyond the static frictions, not by whether each of its shape
 // keys is determined. Where the reversals are too fast for the bristles to climb the Stribeck
@@ -529,10 +529,10 @@ bool Diagnosis::beats_static(const Candidate& c, double bar, double rss) const {
 // forward step too, a hidden Stribeck curve of RealisticDraws (set 4, level 0, draw 4, raw
 // differences) is no longer `stick_slip`.
 double Diagnosis::static_bar(int joint, const std::vector<int>& order, const std::vector<int>& chosen, const Fit& before,
-                             const std::vector<int>& outs, double bar) const {
+                             const std::vector<int>& outs, double bar, int except) const {
   for (int k : order) {
     const Candidate& c = cands_[static_cast<size_t>(k)];
-    if (c.stateful || c.joint != joint) continue;
+    if (c.stateful || c.joint != joint || k == except) continue;
     const std::vector<int> trial = in_place(k, chosen);
     const Fit f = refit(trial, true);
     if (!refused(k, f.coef.tail(c.fit_cols.cols), refitted_damping(c.joint, f)).empty() || !evidence_holds(k, before, f)) continue;
@@ -560,7 +560,7 @@ int Diagnosis::stateful_rival(int accepted, const std::vector<int>& order, const
   const auto outs = outputs_of(accepted);
   const Fit before = refit(chosen, true);
   // The static bar: the accepted cause, or a static one on its joint that does better.
-  double best = static_bar(a.joint, order, chosen, before, outs, rss_on(next_test, outs, test_.N));
+  double best = static_bar(a.joint, order, chosen, before, outs, rss_on(next_test, outs, test_.N), accepted);
   int out = accepted;
   for (int k : order) {
     const Candidate& c = cands_[static_cast<size_t>(k)];
