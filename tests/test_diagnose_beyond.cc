@@ -303,6 +303,19 @@ Draw make_draw(const std::filesystem::path& dir, const std::string& kind, int s,
   return d;
 }
 
+// The drawn joint's true damping set to `damping` (the model's stays random_chain's 0.5): an
+// MJCF error that `parameters` should name.
+void with_true_damping(Draw& d, const std::string& damping) {
+  std::ifstream in(d.c.truth);
+  std::string xml((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string given = "damping=\"0.5\"";
+  const auto at = xml.find(given, xml.find("name=\"j" + std::to_string(d.joint) + "\""));
+  ASSERT_NE(at, std::string::npos) << d.c.truth;
+  xml.replace(at, given.size(), "damping=\"" + damping + "\"");
+  std::ofstream(d.c.truth) << xml;
+  d.what += " true_damping=" + damping;
+}
+
 nlohmann::json run_draw(const std::filesystem::path& dir, const Draw& d, int s) {
   return diagnose_case(d.c, measured(d.c, (dir / (d.what.substr(0, d.what.find(' ')) + std::to_string(s) + ".h5")).string(),
                                      static_cast<unsigned>(0x7ab1e00 + s) + 100, d.m));
@@ -508,14 +521,17 @@ TEST(DiagnoseBeyond, LuGreWrittenModelPredictsFreshLogs) {
   }
 }
 
-// Draw 6 at the default band: its log holds no break-away and the fit no LuGre shape. Fits
-// with fs 0.556 and 21 (truth 0.763) were about equally good, the Stribeck speed ran to the top
-// of its range, and `stick_slip` had been named with fs 27 % low, its errors saying determined.
-// Now: the static friction of its level, Coulomb's fc within 20 % of LuGre's, and
-// `stick_slip` on that joint in `not_tried` with why.
+// Draw 16 at the default band: the Stribeck speed of its LuGre fit runs to the top of its
+// range, determined there (1.36 +- 0.10 rad/s for a truth of 0.065): the data push it beyond
+// the effect's physics, not onto it, and what they show of the effect is its levels. Named:
+// the static friction of its level, Coulomb's fc within 20 % of LuGre's, and `stick_slip` on
+// that joint in `not_tried` with why. (A key that runs to an end while the data leave it loose
+// has drifted there and rejects nothing: draw 6, whose vs had, is `stick_slip` now, its
+// written model leaving 0.0044 of the joint's held-out relative error where Coulomb's left
+// 0.028.)
 TEST(DiagnoseBeyond, LuGreWhoseStribeckSpeedRunsOutOfRangeIsItsStaticFriction) {
-  const auto dir = test::temp_dir("lugre26");
-  const int s = 6;
+  const auto dir = test::temp_dir("lugre_end");
+  const int s = 16;
   const Draw d = make_draw(dir, "lugre", s, 0, Measurement{});
   const auto r = run_draw(dir, d, s);
   const std::string joint = "j" + std::to_string(d.joint);
@@ -540,15 +556,70 @@ TEST(DiagnoseBeyond, LuGreWhoseStribeckSpeedRunsOutOfRangeIsItsStaticFriction) {
 // relative error on the joint; LuGre, fitted as well as the data allow, leaves 4.8 and 7.2 %.
 // Now `stick_slip`, fc within 20 %, fs reported not identifiable, and the written model under
 // a tenth of the model as given's error, which no static friction reaches on these draws.
+// Draw 12 had `coulomb` named too: its fit sits at fs = fc (no hump), its finite differences
+// were refused on one side, and both levels read "not determined". Coulomb's written model
+// left 0.018 of the joint's held-out relative error, LuGre's leaves 0.0023.
 TEST(DiagnoseBeyond, LuGreWithoutBreakAwayInItsLogIsNamedWithFsNotIdentifiable) {
   const auto dir = test::temp_dir("lugre_nobreak");
-  for (int s : {2, 15}) {
+  for (int s : {2, 15, 12}) {
     const auto r = expect_stick_slip(dir, s, 0, BreakAway::said_free);
     for (const auto& cause : r["causes"])
       if (cause["effect"] == "stick_slip") {
         const std::string joint = cause["joints"][0];
         EXPECT_LT(r["final"]["rel_error_test"][joint].get<double>(), 0.1 * r["baseline"]["rel_error_test"][joint].get<double>()) << joint;
       }
+  }
+}
+
+// A hidden Coulomb friction through the 10 Hz import (kind delay_coulomb, no delay), draws 8
+// and 10: LuGre fits it with fs = fc, both determined, the plugin refusing fs below fc, and a
+// bristle damping sigma1 of 35-72 - a damping at the reversals the low-pass rounds off. The
+// edge of what the effect accepts binds there, as the end of a range does: `coulomb`, not
+// `stick_slip` (named on both while a fit at that edge was let through).
+TEST(DiagnoseBeyond, CoulombWhoseLuGreFitRunsToTheEdgeIsCoulomb) {
+  const auto dir = test::temp_dir("coulomb_edge");
+  for (int s : {8, 10}) {
+    const Draw d = make_draw(dir, "delay_coulomb", s, 0, Measurement{});
+    const auto r = run_draw(dir, d, s);
+    std::cout << d.what << ": named " << joined(named(r)) << "\n";
+    const auto causes = named(r);
+    EXPECT_NE(std::find(causes.begin(), causes.end(), "coulomb@j" + std::to_string(d.other)), causes.end()) << joined(causes);
+    for (const auto& n : causes) EXPECT_EQ(n.find("stick_slip"), std::string::npos) << joined(causes);
+  }
+}
+
+// `parameters` beside LuGre on a friction experiment (0.1-0.3 Hz). The bristle damping sigma1
+// acts as a damping at each slow reversal, and a joint's damping beside it is only as certain
+// as the data leave it with the stateful keys free too (decide_parameters: the keys'
+// derivatives as further columns). Held at the keys' fit, draws 11, 17 and 18 read the LuGre
+// joint's damping as contradicted (0.24 for 0.5 on draw 18, its sigma1 3.8 times the truth)
+// and named `parameters` with nothing wrong in the MJCF. Where the MJCF is wrong (the joint's
+// true damping 0.35, draws 0 and 3) `parameters` is named with the damping within 5 %.
+TEST(DiagnoseBeyond, TheBristlesDampingIsNotReadAsTheJointsDamping) {
+  const auto dir = test::temp_dir("lugre_damping");
+  Measurement slow;
+  slow.f_high = 0.3;
+  for (int s : {11, 17, 18}) {
+    const Draw d = make_draw(dir, "lugre", s, 0, slow);
+    const auto r = run_draw(dir, d, s);
+    std::cout << d.what << ": named " << joined(named(r)) << "\n";
+    EXPECT_EQ(joined(named(r)), "stick_slip@j" + std::to_string(d.joint));
+  }
+  for (int s : {0, 3}) {
+    Draw d = make_draw(dir, "lugre", s, 0, slow);
+    with_true_damping(d, "0.35");
+    const auto r = run_draw(dir, d, s);
+    std::cout << d.what << ": named " << joined(named(r)) << "\n";
+    const std::string joint = "j" + std::to_string(d.joint);
+    bool stated = false;
+    for (const auto& cause : r["causes"])
+      if (cause["effect"] == "parameters" && cause["params"].contains("damping:" + joint)) {
+        stated = true;
+        EXPECT_NEAR(cause["params"]["damping:" + joint].get<double>(), 0.35, 0.05 * 0.35) << cause["params"].dump();
+      }
+    EXPECT_TRUE(stated) << joined(named(r));
+    const auto causes = named(r);
+    EXPECT_NE(std::find(causes.begin(), causes.end(), "stick_slip@" + joint), causes.end()) << joined(causes);
   }
 }
 
@@ -613,7 +684,9 @@ TEST(DiagnoseBeyond, CubicDampingAndAnEndStopAreReportedUnexplainedOnTheirInput)
 // A probe over seeds, for the tables of the issue (not run by ctest: --gtest_also_run_disabled_tests).
 // SPML_BEYOND_KIND: a kind of make_draw; SPML_BEYOND_FIRST, SPML_BEYOND_SEEDS: the seeds;
 // SPML_BEYOND_DELAY_MS; SPML_BEYOND_NOISE (torque noise fraction); SPML_BEYOND_BITS;
-// SPML_BEYOND_LOWPASS (the import's low-pass in Hz, default 10; 0: raw differences).
+// SPML_BEYOND_LOWPASS (the import's low-pass in Hz, default 10; 0: raw differences);
+// SPML_BEYOND_FHIGH (the excitation's top frequency); SPML_BEYOND_TRUE_DAMPING (the drawn
+// joint's true damping, the model's staying 0.5).
 TEST(DiagnoseBeyond, DISABLED_SeedTable) {
   auto env = [](const char* k, const char* d) { const char* v = std::getenv(k); return std::string(v ? v : d); };
   const std::string kind = env("SPML_BEYOND_KIND", "clean");
@@ -623,7 +696,8 @@ TEST(DiagnoseBeyond, DISABLED_SeedTable) {
     Measurement m = noise_level(std::stod(env("SPML_BEYOND_NOISE", "0.01")), std::stoi(env("SPML_BEYOND_BITS", "18")));
     m.lowpass_hz = std::stod(env("SPML_BEYOND_LOWPASS", "10"));
     m.f_high = std::stod(env("SPML_BEYOND_FHIGH", "0"));
-    const Draw d = make_draw(dir, kind, s, std::stod(env("SPML_BEYOND_DELAY_MS", "5")), m);
+    Draw d = make_draw(dir, kind, s, std::stod(env("SPML_BEYOND_DELAY_MS", "5")), m);
+    if (const std::string damping = env("SPML_BEYOND_TRUE_DAMPING", ""); !damping.empty()) with_true_damping(d, damping);
     const auto r = run_draw(dir, d, s);
     std::cout << "TABLE " << kind << " seed " << s << " joint j" << d.joint << " other j" << d.other << " (" << d.what << "): delay "
               << 1e3 * r["delay"]["seconds"].get<double>() << " ± " << 1e3 * r["delay"]["stderr"].get<double>() << " ms named "

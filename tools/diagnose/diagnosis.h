@@ -308,6 +308,7 @@ class Diagnosis {
   bool beats_static(const Candidate& c, double bar, double rss) const;
   double static_bar(int joint, const std::vector<int>& order, const std::vector<int>& chosen, const Fit& before, const std::vector<int>& outs,
                     double bar, int except = -1) const;
+  BlockColumns key_columns(const Candidate& c) const;
   void stateful_errors(Candidate& c, const Fit& current, const std::vector<double>& x) const;
   void stateful_report(const Candidate& c, double amplitude, nlohmann::json& params, nlohmann::json& se, nlohmann::json& j) const;
   Eigen::VectorXd written_stateful(const SplitData& s, const mjModel* ext) const;
