@@ -86,6 +86,7 @@ struct Candidate {
   std::vector<double> stateful_se;            // per shape key, absolute
   std::vector<std::string> not_identifiable;  // keys with a relative standard error above 50 %, or that far apart between equally good fits
   bool profiled = false;                      // profile_once ran
+  double written_scale = 1;                   // the written model's factor on its levels (refit_written_effects)
 };
 
 bool is_stateful(const spml_force_plugin& p);   // #22: advance/reset and no regressor
@@ -309,6 +310,8 @@ class Diagnosis {
   double static_bar(int joint, const std::vector<int>& order, const std::vector<int>& chosen, const Fit& before, const std::vector<int>& outs,
                     double bar, int except = -1) const;
   BlockColumns key_columns(const Candidate& c) const;
+  std::vector<double> scaled_keys(const Candidate& c, double a) const;
+  bool scales_with_keys(const Candidate& c) const;
   void stateful_errors(Candidate& c, const Fit& current, const std::vector<double>& x) const;
   void stateful_report(const Candidate& c, double amplitude, nlohmann::json& params, nlohmann::json& se, nlohmann::json& j) const;
   Eigen::VectorXd written_stateful(const SplitData& s, const mjModel* ext) const;

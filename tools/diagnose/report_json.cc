@@ -142,7 +142,7 @@ nlohmann::json Diagnosis::effect_cause(size_t i, const Fit& final_fit, bool free
   // Written with the consistent parameters' joint fit (when parameters are named): its amplitudes go into the declaration.
   const Eigen::Index woff = off - (free ? base_.rank : 0);
   const bool joint_fit = kept && written_;
-  if (c.stateful) {   // #22: every key fitted by simulation (stateful_fit.cc); written as fitted
+  if (c.stateful) {   // #22: every key fitted by simulation (stateful_fit.cc)
     stateful_report(c, joint_fit ? written_->id.extra[woff] : src.coef[off], params, se, stateful_extra);
   } else {
     Eigen::VectorXd theta(inst.nparam());

@@ -477,8 +477,15 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
   // The same for levels on the edge of what the plugin accepts, when the data determine each
   // of them: the edge binds, the data want beyond it (hidden Coulomb frictions through the
   // 10 Hz import, delay_coulomb draws 8 and 10: fs = fc, both determined, sigma1 35-72). Where
-  // one of them is loose the edge does not bind (default-band LuGre draws 12 and 13: fs).
-  std::string at_end = edge_loose ? std::string() : edge;
+  // one of them is loose the edge does not bind (default-band LuGre draws 12 and 13: fs), but
+  // the fit is that effect only with a shape the data determine beside it (12 and 13: sigma0
+  // and sigma1): with every shape key loose too it is a static friction with bristles the data
+  // do not show, which a hidden Coulomb friction and a 5 ms delay (noise 2 %, 16-bit
+  // encoders, delay_coulomb draw 61) had named `stick_slip` by beating Coulomb held out by a
+  // tenth.
+  bool shape_determined = false;
+  for (size_t k = 0; k < ns; ++k) shape_determined = shape_determined || (!level[k] && c.stateful_se[k] <= kNotIdentifiable * c.shape_values[k]);
+  std::string at_end = edge_loose && shape_determined ? std::string() : edge;
   const StatefulSpace box = stateful_space(c);
   // Within the polish's tolerance (1e-4 in the logarithm) of an end, with a margin. (A margin
   // of 5 % rejected the true Stribeck speed of friction experiment 21, 0.966 of the top of its
@@ -701,9 +708,33 @@ BlockColumns Diagnosis::key_columns(const Candidate& c) const {
   return BlockColumns::from_dense(G, fit_.N, static_cast<int>(fit_.y0.size() / fit_.N));
 }
 
+// The candidate's keys with its force's magnitudes multiplied by a: every level, and every
+// shape key in absolute units (not a speed or a position).
+std::vector<double> Diagnosis::scaled_keys(const Candidate& c, double a) const {
+  std::vector<double> v = c.shape_values;
+  for (size_t k = 0; k < v.size() && k < c.shape.size(); ++k)
+    if (is_level(c.shape[k]) || c.shape[k]->domain == SPML_SHAPE_ABSOLUTE) v[k] *= a;
+  return v;
+}
+
+// Does multiplying those keys by a factor multiply the simulated force by it (checked along
+// the fit split)? Then the force's amplitude can be refitted and written in its keys: LuGre's
+// is homogeneous in fc, fs, sigma0, sigma1 and sigma2 together (the bristle state unchanged).
+bool Diagnosis::scales_with_keys(const Candidate& c) const {
+  try {
+    PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, scaled_keys(c, 2)), "diagnose");
+    const Eigen::VectorXd F2 = simulated_columns(inst, fit_).dense().col(0), F = c.fit_cols.dense().col(0);
+    return F.size() == F2.size() && (F2 - 2 * F).norm() <= 1e-9 * (2 * F.norm() + 1e-300);
+  } catch (const PluginError&) {
+    return false;
+  }
+}
+
 // The report's parameters of a stateful cause: every fitted key with its standard error, the
-// amplitude the joint fit gave the simulated force (1: as fitted; extended.xml writes the
-// fitted keys), and the keys the data do not determine.
+// amplitude the joint fit gave the simulated force (1: as fitted), and the keys the data do not
+// determine. extended.xml writes the keys with the amplitude refitted against the written
+// parameters where the force scales with them (refit_written_effects: `params_written`), else
+// as fitted.
 void Diagnosis::stateful_report(const Candidate& c, double amplitude, nlohmann::json& params, nlohmann::json& se, nlohmann::json& j) const {
   for (size_t k = 0; k < c.shape.size(); ++k) {
     params[c.shape[k]->key] = c.shape_values[k];
@@ -715,7 +746,7 @@ void Diagnosis::stateful_report(const Candidate& c, double amplitude, nlohmann::
 }
 
 // The written model's stateful forces on a split (MuJoCo's inverse dynamics of extended.xml
-// leaves them out: they are not regressor columns), as declared: unit amplitude.
+// leaves them out: they are not regressor columns), as declared (written_scale).
 // Only those the written model declares: a cause rejected later (rollouts, the held-out guard) is
 // no longer in extended.xml, and its simulated force must leave the written model's score too.
 Eigen::VectorXd Diagnosis::written_stateful(const SplitData& s, const mjModel* ext) const {
@@ -724,7 +755,7 @@ Eigen::VectorXd Diagnosis::written_stateful(const SplitData& s, const mjModel* e
     const Candidate& c = cands_[static_cast<size_t>(k)];
     if (!c.stateful) continue;
     if (mj_name2id(ext, mjOBJ_TEXT, declaration_name(c).c_str()) < 0) continue;
-    PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "extended");
+    PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, scaled_keys(c, c.written_scale)), "extended");
     out += simulated_columns(inst, s).dense().col(0);
   }
   return out;
