@@ -514,6 +514,18 @@ TEST(DiagnoseBeyond, LuGreWrittenModelPredictsFreshLogs) {
   std::filesystem::create_directories(out);
   const auto fitted = diagnose(opt, out.string()).report;
   ASSERT_EQ(joined(named(fitted)), "stick_slip@" + joint);
+  // report.md says which keys the data leave loose (one of equally good fits), without an error:
+  // a review found them printed to four figures with a standard error like any other.
+  std::ifstream md(out / "report.md");
+  const std::string text((std::istreambuf_iterator<char>(md)), std::istreambuf_iterator<char>());
+  for (const auto& cause : fitted["causes"])
+    for (const auto& k : cause.value("not_identifiable", nlohmann::json::array())) {
+      const auto at = text.find("   - " + k.get<std::string>() + " ");
+      ASSERT_NE(at, std::string::npos) << k << " not in report.md";
+      const std::string line = text.substr(at, text.find('\n', at) - at);
+      EXPECT_NE(line.find("(not identifiable)"), std::string::npos) << line;
+      EXPECT_EQ(line.find("±"), std::string::npos) << line;
+    }
   Case written = d.c;
   written.user = (out / "extended.xml").string();
   for (double f_high : {0.3, 0.0}) {
