@@ -22,7 +22,15 @@ std::string pct(double v) { return num(100 * v, 3) + " %"; }
 // extended.xml states otherwise (refitted with the parameters it writes) is shown beside it.
 std::string params_text(const nlohmann::json& c, const std::string& sep) {
   std::string out;
-  const nlohmann::json loose = c.value("not_identifiable", nlohmann::json::array()), written = c.value("params_written", nlohmann::json::object());
+  const nlohmann::json loose = c.value("not_identifiable", nlohmann::json::array());
+  // What extended.xml states: an effect's params_written; for `parameters`, the consistent fit's
+  // joint terms (an armature estimated at -0.09 is written 0), except on joints whose terms were
+  // rejected (left at the MJCF's).
+  nlohmann::json written = c.value("params_written", nlohmann::json::object());
+  const nlohmann::json rejected = c.value("rejected_joint_terms", nlohmann::json::object());
+  if (c.contains("written") && c["written"].contains("terms"))
+    for (const auto& [name, term] : c["written"]["terms"].items())
+      if (term.contains("value") && !rejected.contains(name.substr(name.find(':') + 1))) written[name] = term["value"];
   for (auto it = c["params"].begin(); it != c["params"].end(); ++it) {
     const bool free = c["effect"] != "parameters" && std::find(loose.begin(), loose.end(), it.key()) != loose.end();
     out += (out.empty() ? "" : sep) + it.key() + " " + (free ? num(it.value().get<double>(), 2) + " (not identifiable)" : num(it.value().get<double>()));
