@@ -321,8 +321,8 @@ TEST(Diagnose, PandaExampleFindsTheDefaultsAndTheFriction) {
   // did better without the cause on the cause's joints.
   EXPECT_TRUE(rep["rollout"]["worse_on"].empty()) << rep["rollout"].dump(1);
   // report.md shows what extended.xml states beside a fitted joint term it writes otherwise (a
-  // review read armature -0.09 in report.md where extended.xml writes 0), and nothing for the
-  // joints whose terms were rejected (left at the Menagerie's).
+  // review read armature -0.09 in report.md where extended.xml writes 0), and on the joints whose
+  // terms were rejected that they are left at the Menagerie's.
   std::ifstream md(dir / "report.md");
   const std::string text((std::istreambuf_iterator<char>(md)), std::istreambuf_iterator<char>());
   int shown = 0;
@@ -332,7 +332,9 @@ TEST(Diagnose, PandaExampleFindsTheDefaultsAndTheFriction) {
     const std::string line = text.substr(at, text.find('\n', at) - at);
     const bool rejected = params.value("rejected_joint_terms", nlohmann::json::object()).contains(name.substr(name.find(':') + 1));
     const double v = params["params"][name].get<double>(), w = term["value"].get<double>();
-    if (rejected || std::fabs(w - v) <= 1e-3 * std::fabs(v)) {
+    if (rejected) {
+      EXPECT_NE(line.find("rejected, extended.xml keeps the MJCF's"), std::string::npos) << line;
+    } else if (std::fabs(w - v) <= 1e-3 * std::fabs(v)) {
       EXPECT_EQ(line.find("extended.xml:"), std::string::npos) << line;
     } else {
       EXPECT_NE(line.find("extended.xml:"), std::string::npos) << line;

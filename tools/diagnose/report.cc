@@ -17,9 +17,10 @@ std::string num(double v, int precision = 4) {
 std::string pct(double v) { return num(100 * v, 3) + " %"; }
 
 // "name value ± se (was prior)" lines of a cause's parameters.
-// A key the data do not determine is shown to two figures and said so (one of equally good
-// fits: LuGre's fs and vs on a log without break-away were printed to four); a value that
-// extended.xml states otherwise (refitted with the parameters it writes) is shown beside it.
+// A key the data do not determine is shown to three figures and said so, without an error (one
+// of equally good fits: LuGre's fs and vs on a log without break-away were printed with one); a
+// value that extended.xml states otherwise (refitted with the parameters it writes) is shown
+// beside it, and a joint term of `parameters` rejected on its joint says so.
 std::string params_text(const nlohmann::json& c, const std::string& sep) {
   std::string out;
   const nlohmann::json loose = c.value("not_identifiable", nlohmann::json::array());
@@ -33,12 +34,14 @@ std::string params_text(const nlohmann::json& c, const std::string& sep) {
       if (term.contains("value") && !rejected.contains(name.substr(name.find(':') + 1))) written[name] = term["value"];
   for (auto it = c["params"].begin(); it != c["params"].end(); ++it) {
     const bool free = c["effect"] != "parameters" && std::find(loose.begin(), loose.end(), it.key()) != loose.end();
-    out += (out.empty() ? "" : sep) + it.key() + " " + (free ? num(it.value().get<double>(), 2) + " (not identifiable)" : num(it.value().get<double>()));
+    out += (out.empty() ? "" : sep) + it.key() + " " + (free ? num(it.value().get<double>(), 3) + " (not identifiable)" : num(it.value().get<double>()));
     if (!free && c["stderr"].contains(it.key()) && c["stderr"][it.key()].is_number()) out += " ± " + num(c["stderr"][it.key()].get<double>(), 2);
     if (c.contains("prior") && c["prior"].contains(it.key())) out += " (MJCF: " + num(c["prior"][it.key()].get<double>()) + ")";
     if (written.contains(it.key()) && written[it.key()].is_number()) {
       const double v = it.value().get<double>(), w = written[it.key()].get<double>();
       if (std::fabs(w - v) > 1e-3 * std::fabs(v)) out += "; extended.xml: " + num(w);
+    } else if (const auto colon = it.key().rfind(':'); colon != std::string::npos && rejected.contains(it.key().substr(colon + 1))) {
+      out += "; rejected, extended.xml keeps the MJCF's";
     }
   }
   const nlohmann::json shape = c.value("shape", nlohmann::json::object());
@@ -151,7 +154,9 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
   }
   if (!r["not_tried"].empty()) {
     s << "\n## Not tried\n\n";
-    for (const auto& n : r["not_tried"]) s << "- " << n["effect"].get<std::string>() << ": " << n["reason"].get<std::string>() << "\n";
+    for (const auto& n : r["not_tried"])
+      s << "- " << n["effect"].get<std::string>() << (n.contains("joint") ? " on " + n["joint"].get<std::string>() : "") << ": "
+        << n["reason"].get<std::string>() << "\n";
   }
   if (!r["notes"].empty()) {
     s << "\n## Notes\n\n";
