@@ -87,6 +87,7 @@ struct Candidate {
   std::vector<std::string> not_identifiable;  // keys with a relative standard error above 50 %, or that far apart between equally good fits
   bool profiled = false;                      // profile_once ran
   double written_scale = 1;                   // the written model's factor on its levels (refit_written_effects)
+  std::vector<bool> at_edge;                  // per shape key: a side of it the plugin refuses at the fit (stateful_errors)
 };
 
 bool is_stateful(const spml_force_plugin& p);   // #22: advance/reset and no regressor

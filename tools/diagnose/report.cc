@@ -29,9 +29,13 @@ std::string params_text(const nlohmann::json& c, const std::string& sep) {
   // rejected (left at the MJCF's).
   nlohmann::json written = c.value("params_written", nlohmann::json::object());
   const nlohmann::json rejected = c.value("rejected_joint_terms", nlohmann::json::object());
+  auto rejected_term = [&](const std::string& name) {   // "damping:joint6" on a joint whose terms were rejected
+    const auto colon = name.rfind(':');
+    return colon != std::string::npos && rejected.contains(name.substr(colon + 1));
+  };
   if (c.contains("written") && c["written"].contains("terms"))
     for (const auto& [name, term] : c["written"]["terms"].items())
-      if (term.contains("value") && !rejected.contains(name.substr(name.find(':') + 1))) written[name] = term["value"];
+      if (term.contains("value") && !rejected_term(name)) written[name] = term["value"];
   for (auto it = c["params"].begin(); it != c["params"].end(); ++it) {
     const bool free = c["effect"] != "parameters" && std::find(loose.begin(), loose.end(), it.key()) != loose.end();
     out += (out.empty() ? "" : sep) + it.key() + " " + (free ? num(it.value().get<double>(), 3) + " (not identifiable)" : num(it.value().get<double>()));
@@ -40,7 +44,7 @@ std::string params_text(const nlohmann::json& c, const std::string& sep) {
     if (written.contains(it.key()) && written[it.key()].is_number()) {
       const double v = it.value().get<double>(), w = written[it.key()].get<double>();
       if (std::fabs(w - v) > 1e-3 * std::fabs(v)) out += "; extended.xml: " + num(w);
-    } else if (const auto colon = it.key().rfind(':'); colon != std::string::npos && rejected.contains(it.key().substr(colon + 1))) {
+    } else if (rejected_term(it.key())) {
       out += "; rejected, extended.xml keeps the MJCF's";
     }
   }

@@ -21,6 +21,7 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <map>
 
 #include "diagnosis.h"
@@ -38,6 +39,24 @@ constexpr int kProfileEvalsPerKey = 100;   // ... each polished this long over t
 constexpr double kProfileChi2 = 3.84;      // a profile point the data do not reject: chi-square(1) at 95 %
 constexpr double kEndMargin = 1e-3;         // settle_levels: a shape key this close (in the logarithm) to an end of its range is at it
 constexpr double kUnshapedGain = 0.1;      // beats_static: the held-out gain over the static frictions of a fit with no shape key determined
+
+// The derivative of a force with respect to x[k] (x: the keys' logarithms) by central
+// differences of 0.01, one-sided where `force` fails on one side (the plugin refuses the keys
+// there: LuGre at fs = fc), 0 where it fails on both; `edge` says whether a side failed. At
+// such an edge a central difference had given a zero column, both levels "not determined", and
+// `coulomb` was named where the stateful fit left a third of its held-out residual.
+using ForceAt = std::function<bool(const std::vector<double>& x, Eigen::VectorXd& force)>;
+Eigen::VectorXd log_derivative(const ForceAt& force, const std::vector<double>& x, size_t k, const Eigen::VectorXd& F0, bool* edge = nullptr) {
+  std::vector<double> a = x, b = x;
+  a[k] += 0.01, b[k] -= 0.01;
+  Eigen::VectorXd Fa, Fb;
+  const bool up = force(a, Fa), down = force(b, Fb);
+  if (edge) *edge = !up || !down;
+  return up && down ? Eigen::VectorXd((Fa - Fb) / 0.02)
+         : up       ? Eigen::VectorXd((Fa - F0) / 0.01)
+         : down     ? Eigen::VectorXd((F0 - Fb) / 0.01)
+                    : Eigen::VectorXd::Zero(F0.size());
+}
 
 }  // namespace
 
@@ -415,6 +434,12 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
       if (std::string(key->name) == c.shape[k]->key) return key->min == 0;
     return false;
   };
+  auto determined = [&](size_t k) { return c.stateful_se[k] <= kNotIdentifiable * c.shape_values[k]; };
+  auto refuse = [&](const std::string& why) {
+    c.skipped = true;
+    c.searched = true;
+    not_tried_.push_back({{"effect", c.plugin->name}, {"joint", c.joint_name}, {"reason", "fitted by simulation, but its " + why}});
+  };
   // A level the data leave free (no influence once the base parameters are refitted: a viscous
   // sigma2 beside the MJCF's damping), or loose (relative error above 50 %) and not needed -
   // set to 0 it costs less evidence than the threshold - is set to 0 where its key allows: no
@@ -422,7 +447,7 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
   // and fs made the whole candidate "not determined" and `coulomb` was named instead.)
   const double drop = stateful_drop(c, current, x);
   for (size_t k = 0; k < ns; ++k) {
-    if (!level[k] || !zero_allowed(k) || c.stateful_se[k] <= kNotIdentifiable * c.shape_values[k]) continue;
+    if (!level[k] || !zero_allowed(k) || determined(k)) continue;
     std::vector<double> zeroed = x;
     zeroed[k] = -std::numeric_limits<double>::infinity();   // exactly 0: 1e-300 passed LuGre's fc > 0, and fc was declared 0
     const double dz = stateful_drop(c, current, zeroed);
@@ -442,30 +467,19 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
   // fs = fc, no Stribeck hump: default-band draws 12 and 13, whose reversals hide the
   // break-away, had `coulomb` named where the stateful fit explained what Coulomb left). It is
   // reported not identifiable, and the fit held to the higher bar of an unshaped one (shaped()).
-  auto on_edge = [&](size_t k) {
-    for (double step : {-0.01, 0.01}) {
-      std::vector<double> moved = x;
-      moved[k] += step;
-      if (!std::isfinite(stateful_drop(c, current, moved))) return true;
-    }
-    return false;
-  };
+  // (The edge: stateful_errors' differences at this x, c.at_edge.)
   std::string loose, edge;
   int determined_levels = 0;
   bool edge_loose = false;
   for (size_t k = 0; k < ns; ++k) {
     if (!level[k] || c.shape_values[k] == 0) continue;
-    const bool determined = c.stateful_se[k] <= kNotIdentifiable * c.shape_values[k], at_edge = on_edge(k);
-    if (at_edge) edge += std::string(edge.empty() ? "" : ", ") + c.shape[k]->key, edge_loose = edge_loose || !determined;
-    if (determined) ++determined_levels;
+    const bool at_edge = k < c.at_edge.size() && c.at_edge[k];
+    if (at_edge) edge += std::string(edge.empty() ? "" : ", ") + c.shape[k]->key, edge_loose = edge_loose || !determined(k);
+    if (determined(k)) ++determined_levels;
     else if (!at_edge) loose += std::string(loose.empty() ? "" : ", ") + c.shape[k]->key;
   }
   if (determined_levels == 0 || !loose.empty()) {
-    c.skipped = true;
-    c.searched = true;
-    not_tried_.push_back({{"effect", c.plugin->name}, {"joint", c.joint_name},
-                          {"reason", "fitted by simulation, but its levels (" + (loose.empty() ? std::string("all") : loose) +
-                                         ") are not determined by the data: not this effect"}});
+    refuse("levels (" + (loose.empty() ? std::string("all") : loose) + ") are not determined by the data: not this effect");
     return;
   }
   // Nor is it when a shape key ran to the end of its declared range: the data push it beyond
@@ -484,7 +498,7 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
   // encoders, delay_coulomb draw 61) had named `stick_slip` by beating Coulomb held out by a
   // tenth.
   bool shape_determined = false;
-  for (size_t k = 0; k < ns; ++k) shape_determined = shape_determined || (!level[k] && c.stateful_se[k] <= kNotIdentifiable * c.shape_values[k]);
+  for (size_t k = 0; k < ns; ++k) shape_determined = shape_determined || (!level[k] && determined(k));
   std::string at_end = edge_loose && shape_determined ? std::string() : edge;
   const StatefulSpace box = stateful_space(c);
   // Within the polish's tolerance (1e-4 in the logarithm) of an end, with a margin. (A margin
@@ -494,7 +508,6 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
     const double v = std::log(std::max(c.shape_values[k], 1e-300));
     return v <= box.lb[k] + kEndMargin || v >= box.ub[k] - kEndMargin;
   };
-  auto determined = [&](size_t k) { return c.stateful_se[k] <= kNotIdentifiable * c.shape_values[k]; };
   // A key the data leave loose has drifted to its end rather than been pushed there, when the
   // fit has a shape the data show - a shape key determined inside its range (LuGre's vs once
   // fs = fc, the hump it shapes gone, beside determined bristles: default-band draw 12,
@@ -506,12 +519,8 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
   for (size_t k = 0; k < ns; ++k)
     if (!level[k] && at_an_end(k) && (determined(k) || !shaped_inside)) at_end += std::string(at_end.empty() ? "" : ", ") + c.shape[k]->key;
   if (!at_end.empty()) {
-    c.skipped = true;
-    c.searched = true;
-    not_tried_.push_back({{"effect", c.plugin->name}, {"joint", c.joint_name},
-                          {"reason", "fitted by simulation, but its " + at_end +
-                                         " ran to the end of the declared range or the edge of what the effect accepts: what the data show "
-                                         "of it is its levels, a static friction"}});
+    refuse(at_end + " ran to the end of the declared range or the edge of what the effect accepts: what the data show of it is its "
+                    "levels, a static friction");
     return;
   }
   PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
@@ -631,26 +640,21 @@ int Diagnosis::stateful_rival(int accepted, const std::vector<int>& order, const
   return out;
 }
 
-// Gauss-Newton standard errors in the logarithms (central differences of the projected
-// force), inflated by the residual's autocorrelation; large ones are not identifiable.
+// Gauss-Newton standard errors in the logarithms (differences of the projected force, one-sided
+// at an edge: log_derivative, which keys are at one goes to c.at_edge), inflated by the
+// residual's autocorrelation; large ones are not identifiable.
 void Diagnosis::stateful_errors(Candidate& c, const Fit& current, const std::vector<double>& x) const {
   const size_t ns = x.size();
+  c.at_edge.assign(ns, false);
   Eigen::VectorXd F0;
   const double drop = stateful_drop(c, current, x, &F0);
   if (!std::isfinite(drop)) return;
+  const ForceAt projected = [&](const std::vector<double>& y, Eigen::VectorXd& F) { return std::isfinite(stateful_drop(c, current, y, &F)); };
   Eigen::MatrixXd J(F0.size(), static_cast<Eigen::Index>(ns));
   for (size_t k = 0; k < ns; ++k) {
-    std::vector<double> a = x, b = x;
-    a[k] += 0.01, b[k] -= 0.01;
-    // One-sided where the plugin refuses one side: a fit on the edge of what it accepts (LuGre
-    // with fs = fc, no Stribeck hump) had a zero column there, both levels "not determined",
-    // and `coulomb` was named where the stateful fit left a third of its held-out residual.
-    Eigen::VectorXd Fa, Fb;
-    const bool up = std::isfinite(stateful_drop(c, current, a, &Fa)), down = std::isfinite(stateful_drop(c, current, b, &Fb));
-    J.col(static_cast<Eigen::Index>(k)) = up && down ? Eigen::VectorXd((Fa - Fb) / 0.02)
-                                          : up       ? Eigen::VectorXd((Fa - F0) / 0.01)
-                                          : down     ? Eigen::VectorXd((F0 - Fb) / 0.01)
-                                                     : Eigen::VectorXd::Zero(F0.size());
+    bool edge = false;
+    J.col(static_cast<Eigen::Index>(k)) = log_derivative(projected, x, k, F0, &edge);
+    c.at_edge[k] = edge;
   }
   const Eigen::VectorXd r = current.residual - F0;
   const double n = static_cast<double>(r.size());
@@ -685,7 +689,9 @@ void Diagnosis::stateful_errors(Candidate& c, const Fit& current, const std::vec
 // parameters (decide_parameters).
 BlockColumns Diagnosis::key_columns(const Candidate& c) const {
   std::vector<Eigen::VectorXd> cols;
-  auto force = [&](const std::vector<double>& v, Eigen::VectorXd& F) {
+  const ForceAt simulated = [&](const std::vector<double>& y, Eigen::VectorXd& F) {
+    std::vector<double> v(y.size());
+    for (size_t k = 0; k < y.size(); ++k) v[k] = std::exp(y[k]);
     try {
       PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, v), "diagnose");
       F = simulated_columns(inst, fit_).dense().col(0);
@@ -694,14 +700,15 @@ BlockColumns Diagnosis::key_columns(const Candidate& c) const {
       return false;
     }
   };
-  for (size_t k = 0; k < c.shape_values.size(); ++k) {
+  std::vector<double> x(c.shape_values.size());
+  for (size_t k = 0; k < x.size(); ++k) x[k] = std::log(c.shape_values[k]);   // a key at 0: -inf, left out below
+  Eigen::VectorXd F0;
+  if (!simulated(x, F0)) return BlockColumns::from_dense(Eigen::MatrixXd(fit_.y0.size(), 0), fit_.N, static_cast<int>(fit_.y0.size() / fit_.N));
+  for (size_t k = 0; k < x.size(); ++k) {
     if (!(c.shape_values[k] > 0)) continue;
-    std::vector<double> a = c.shape_values, b = c.shape_values;
-    a[k] *= std::exp(0.01), b[k] *= std::exp(-0.01);
-    Eigen::VectorXd Fa, Fb, F0;
-    const bool up = force(a, Fa), down = force(b, Fb);
-    if (up && down) cols.push_back((Fa - Fb) / 0.02);
-    else if ((up || down) && force(c.shape_values, F0)) cols.push_back(up ? Eigen::VectorXd((Fa - F0) / 0.01) : Eigen::VectorXd((F0 - Fb) / 0.01));
+    bool edge = false;
+    Eigen::VectorXd d = log_derivative(simulated, x, k, F0, &edge);
+    if (!edge || d.squaredNorm() > 0) cols.push_back(std::move(d));   // none where the plugin refuses both sides
   }
   Eigen::MatrixXd G(fit_.y0.size(), static_cast<Eigen::Index>(cols.size()));
   for (size_t k = 0; k < cols.size(); ++k) G.col(static_cast<Eigen::Index>(k)) = cols[k];
