@@ -352,10 +352,12 @@ TEST(DiagnoseBeyond, TheLoggersHalfTickIsCorrectedWithoutAName) {
 // so the friction's residual swamped the gain. Now: `delay` within 1 ms, no `parameters`, and
 // no cause on a joint without friction. (The estimate sits 0.3-0.4 ms below the truth on these
 // draws, as clean draws read -0.2 to -0.4 ms: central differences of semi-implicit Euler
-// positions put the velocity half a tick ahead of the logged torque.)
+// positions put the velocity half a tick ahead of the logged torque.) Draws 2 and 9 read 4.11
+// and 3.30 ms with `parameters` beside them while the rows where the Coulomb joint sticks were
+// in the search (sliding_rows); 4.66 and 4.70 ms, nothing beside, without them.
 TEST(DiagnoseBeyond, DelayIsFoundBesideStaticFriction) {
   const auto dir = test::temp_dir("delay_coulomb");
-  for (int s : {1, 3}) {
+  for (int s : {1, 3, 2, 9}) {
     const Draw d = make_draw(dir, "delay_coulomb", s, 5, Measurement{});
     const auto r = run_draw(dir, d, s);
     const auto causes = named(r);
@@ -367,6 +369,29 @@ TEST(DiagnoseBeyond, DelayIsFoundBesideStaticFriction) {
       if (n != "delay") {
         EXPECT_EQ(n.substr(n.find('@') + 1), "j" + std::to_string(d.other)) << "a cause beside the delay: " << joined(causes);
       }
+  }
+}
+
+// A Coulomb friction under the controller on a friction experiment (kind delay_coulomb with no
+// delay, 0.1-0.3 Hz, 2 % torque noise, 16-bit encoders): the joint sticks at each slow
+// reversal, and its friction there is whatever torque holds it, not the fc sign(qd) of the
+// delay search's nuisance. With those rows in the search, -4.0, -4.2, -9.0 and -5.1 ms were
+// named on draws 0, 1, 2 and 6 (estimates -1 to -33 ms over 16 draws); left out
+// (sliding_rows), no delay, and the friction named on its joint (draw 1 reads -9.0 +- 1.7 ms,
+// not named, and has `parameters` named beside it: the stick phases' torque, which no static
+// cause holds, taken by an inertial combination).
+TEST(DiagnoseBeyond, ACoulombFrictionsStickPhasesAreNoDelay) {
+  const auto dir = test::temp_dir("stick_no_delay");
+  Measurement m = noise_level(0.02, 16);
+  m.f_high = 0.3;
+  for (int s : {0, 1, 2, 6}) {
+    const Draw d = make_draw(dir, "delay_coulomb", s, 0, m);
+    const auto r = run_draw(dir, d, s);
+    const auto causes = named(r);
+    std::cout << d.what << ": offset " << 1e3 * r["delay"]["seconds"].get<double>() << " ± " << 1e3 * r["delay"]["stderr"].get<double>()
+              << " ms, named " << joined(causes) << "\n";
+    EXPECT_FALSE(r["delay"]["named"].get<bool>()) << r["delay"].dump();
+    EXPECT_NE(std::find(causes.begin(), causes.end(), "coulomb@j" + std::to_string(d.other)), causes.end()) << joined(causes);
   }
 }
 
@@ -544,14 +569,17 @@ TEST(DiagnoseBeyond, LuGreWrittenModelPredictsFreshLogs) {
   }
 }
 
-// Draw 16 at the default band: the Stribeck speed of its LuGre fit runs to the top of its
+// Draw 16 at the default band: the Stribeck speed of its LuGre fit ran to the top of its
 // range, determined there (1.36 +- 0.10 rad/s for a truth of 0.065): the data push it beyond
-// the effect's physics, not onto it, and what they show of the effect is its levels. Named:
-// the static friction of its level, Coulomb's fc within 20 % of LuGre's, and `stick_slip` on
-// that joint in `not_tried` with why. (A key that runs to an end while the data leave it loose
-// has drifted there and rejects nothing: draw 6, whose vs had, is `stick_slip` now, its
-// written model leaving 0.0044 of the joint's held-out relative error where Coulomb's left
-// 0.028.)
+// the effect's physics, not onto it, and what they show of the effect is its levels. Named
+// then: the static friction of its level, Coulomb's fc within 20 % of LuGre's, and
+// `stick_slip` on that joint in `not_tried` with why. The draw is borderline: on another CPU
+// (other OpenBLAS kernels) the same commit fits fs = fc with vs loose at 0.019 rad/s and names
+// `stick_slip`, fc within 0.2 %, fs and vs said not identifiable. Either is a right answer;
+// what must not happen is a `stick_slip` whose Stribeck speed is stated as determined where the
+// data pushed it. (A key that runs to an end while the data leave it loose has drifted there
+// and rejects nothing: draw 6, whose vs had, is `stick_slip` now, its written model leaving
+// 0.0044 of the joint's held-out relative error where Coulomb's left 0.028.)
 TEST(DiagnoseBeyond, LuGreWhoseStribeckSpeedRunsOutOfRangeIsItsStaticFriction) {
   const auto dir = test::temp_dir("lugre_end");
   const int s = 16;
@@ -559,18 +587,32 @@ TEST(DiagnoseBeyond, LuGreWhoseStribeckSpeedRunsOutOfRangeIsItsStaticFriction) {
   const auto r = run_draw(dir, d, s);
   const std::string joint = "j" + std::to_string(d.joint);
   std::cout << d.what << " on " << joint << ": named " << joined(named(r)) << "\n  not tried " << r["not_tried"].dump() << "\n";
-  bool coulomb = false, said = false;
-  for (const auto& cause : r["causes"])
-    if (!cause.contains("superseded_by") && cause["effect"] == "coulomb" && cause["joints"][0] == joint) {
+  bool coulomb = false, said = false, stick_slip = false;
+  for (const auto& cause : r["causes"]) {
+    if (cause.contains("superseded_by") || cause["joints"][0] != joint) continue;
+    if (cause["effect"] == "coulomb") {
       coulomb = true;
       EXPECT_NEAR(cause["params"][joint + ".fc"].get<double>(), d.fc, 0.2 * d.fc);
     }
+    if (cause["effect"] == "stick_slip") {
+      stick_slip = true;
+      std::cout << "  " << cause["params"].dump() << ", not identifiable " << cause["not_identifiable"].dump() << "\n";
+      EXPECT_NEAR(cause["params"]["fc"].get<double>(), d.fc, 0.2 * d.fc);
+      const auto& free = cause["not_identifiable"];
+      const double vs = cause["params"]["vs"].get<double>(), true_vs = 0.0652433493084;
+      EXPECT_TRUE(std::find(free.begin(), free.end(), "vs") != free.end() || (vs > true_vs / 5 && vs < 5 * true_vs))
+          << "vs " << vs << " stated as determined for a truth of " << true_vs;
+    }
+  }
   for (const auto& n : r["not_tried"])
     said = said || (n["effect"] == "stick_slip" && n.value("joint", "") == joint &&
                     n["reason"].get<std::string>().find("a static friction") != std::string::npos);
-  EXPECT_TRUE(coulomb) << joined(named(r));
-  EXPECT_TRUE(said) << r["not_tried"].dump();
+  EXPECT_TRUE(coulomb != stick_slip) << "one friction on the joint: " << joined(named(r));
+  if (coulomb) {
+    EXPECT_TRUE(said) << r["not_tried"].dump();
+  }
 }
+
 
 // Draws 2 and 15 at the default band: the reversals are too fast for the bristles to climb the
 // Stribeck hump, and equally good fits leave fs, vs and the bristles' sigma0 and sigma1 each
