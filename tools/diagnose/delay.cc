@@ -224,20 +224,22 @@ void Diagnosis::estimate_delay() {
     // a roundoff-limited stop: x holds the best point found
   }
   if (value < best_rss) best = x[0], best_rss = value;
-  int rank = fit_.base.cols;
-  for (const auto& b : nuisance) rank += b.cols;
-  delay_decide(best, projected, rank);
+  delay_decide(best, projected, nuisance, w);
 }
 
 // Standard error (Gauss-Newton, autocorrelation-robust), evidence and the held-out test; then
-// the correction of every split when `delay` is named.
-void Diagnosis::delay_decide(double d, const std::function<Eigen::VectorXd(double)>& projected, int rank) {
+// the correction of every split when `delay` is named. `nuis_fit` and `wf`: the search's nuisance
+// and row weights on the fit split.
+void Diagnosis::delay_decide(double d, const std::function<Eigen::VectorXd(double)>& projected, const std::vector<BlockColumns>& nuis_fit,
+                             const Eigen::VectorXd& wf) {
   const double h = uniform_step(fit_), eps = 0.05 * h;
   const Eigen::VectorXd r = projected(d), r0 = projected(0);
   const Eigen::VectorXd J = (projected(d + eps) - projected(d - eps)) / (2 * eps);
   const double JJ = J.squaredNorm();
   const Eigen::MatrixXd S = long_run_covariance(J.cwiseProduct(r), r, fit_.N);
-  const double n = sliding_rows(fit_).sum();   // the rows the search weighed
+  const double n = wf.sum();   // the rows the search weighed
+  int rank = fit_.base.cols;
+  for (const auto& b : nuis_fit) rank += b.cols;
   delay_.seconds = d;
   delay_.stderr_ = JJ > 0 ? std::sqrt(S(0, 0) * n / std::max(n - rank - 1, 1.0)) / JJ : std::numeric_limits<double>::infinity();
   const double n_eff = n * effective_fraction(r, fit_.N);
@@ -246,14 +248,15 @@ void Diagnosis::delay_decide(double d, const std::function<Eigen::VectorXd(doubl
   // and without the shift, scored on the test split. Without the nuisance here, static
   // friction the model lacks on another joint dominated the held-out residual and a 5 ms delay
   // failed the test (DiagnoseBeyond.DelayIsFoundBesideStaticFriction).
-  const std::vector<BlockColumns> nuis_fit = delay_nuisance(fit_), nuis_test = delay_nuisance(test_);
-  const Eigen::VectorXd wf = sliding_rows(fit_), wt = sliding_rows(test_);
+  const std::vector<BlockColumns> nuis_test = delay_nuisance(test_);
+  const Eigen::VectorXd wt = sliding_rows(test_);
+  const Eigen::VectorXd b_fit = net_of_frictionloss(fit_).cwiseProduct(wf), b_test = net_of_frictionloss(test_).cwiseProduct(wt);
   auto test_rss = [&](double dd) {
     const double ht = uniform_step(test_);
     std::vector<BlockColumns> F{shifted_block(fit_.base, dd, h, wf)}, T{shifted_block(test_.base, dd, ht, wt)};
     for (size_t b = 0; b < nuis_fit.size(); ++b) F.push_back(shifted_block(nuis_fit[b], dd, h, wf)), T.push_back(shifted_block(nuis_test[b], dd, ht, wt));
-    const Fit f = fit_blocks(pointers(F), net_of_frictionloss(fit_).cwiseProduct(wf), false);
-    return (net_of_frictionloss(test_).cwiseProduct(wt) - predict_blocks(pointers(T), f.coef, test_.y0.size())).squaredNorm();
+    const Fit f = fit_blocks(pointers(F), b_fit, false);
+    return (b_test - predict_blocks(pointers(T), f.coef, test_.y0.size())).squaredNorm();
   };
   // A lead of half a sample is the hold itself (see kMinDelay): at 200 Hz it is 2.5 ms, above
   // kMinDelay, and clean simulated logs had it named. Offsets near it are not named either.

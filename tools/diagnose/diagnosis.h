@@ -271,7 +271,8 @@ class Diagnosis {
   void note_rejections(const MjcfEdits& edits, std::vector<std::string>& notes);
   // delay.cc (#22)
   void estimate_delay();
-  void delay_decide(double d, const std::function<Eigen::VectorXd(double)>& projected, int rank);
+  void delay_decide(double d, const std::function<Eigen::VectorXd(double)>& projected, const std::vector<BlockColumns>& nuis_fit,
+                    const Eigen::VectorXd& wf);
   double uniform_step(const SplitData& s) const;
   Eigen::VectorXd targets_at(const SplitData& s, double d) const;
   Eigen::VectorXd net_of_frictionloss(const SplitData& s) const;
