@@ -61,6 +61,7 @@ BlockColumns BlockColumns::from_dense(const Eigen::MatrixXd& M, Eigen::Index row
   b.rows_per_output = rows_per_output;
   b.outputs = outputs;
   b.cols = static_cast<int>(M.cols());
+  if (M.cols() == 0) return b;   // no parts (maxCoeff of an empty part is undefined)
   for (int o = 0; o < outputs; ++o) {
     auto part = M.middleRows(o * rows_per_output, rows_per_output);
     if (part.cwiseAbs().maxCoeff() == 0) continue;

@@ -279,6 +279,7 @@ class Diagnosis {
   BlockColumns coulomb_nuisance(const SplitData& s) const;
   std::vector<BlockColumns> delay_nuisance(const SplitData& s) const;
   Eigen::VectorXd sliding_rows(const SplitData& s) const;
+  BlockColumns offset_column(const SplitData& s) const;
   OffsetBeside offset_beside(const std::vector<int>& stateful, DelayResult& first);
   void choose(const Selection& fresh);
   Selection set_aside(const Selection& fresh);

@@ -15,15 +15,19 @@ WrittenParameters Diagnosis::consistent_parameters() const {
   Eigen::MatrixXd W = stacked_standard_regressor(*reg_, fit_.split.X, *fit_.cols, opt_.data + ": split " + fit_.name);
   filter_stacked(fit_.sos, W, fit_.N, fit_.runs);
   const std::vector<int> effects = kept_effects();
+  // The offset between torques and states goes free beside them, last (decide_parameters says
+  // why): it is the data's, not the model's, so it is left out of the written prediction.
+  const BlockColumns offset = offset_column(fit_);
   Eigen::Index ne = 0;
   for (int k : effects) ne += cands_[static_cast<size_t>(k)].fit_cols.cols;
-  Eigen::MatrixXd E(W.rows(), ne);
+  Eigen::MatrixXd E(W.rows(), ne + offset.cols);
   Eigen::Index at = 0;
   for (int k : effects) {
     const BlockColumns& c = cands_[static_cast<size_t>(k)].fit_cols;
     E.middleCols(at, c.cols) = c.dense();
     at += c.cols;
   }
+  if (offset.cols > 0) E.rightCols(offset.cols) = offset.dense();
   ConsistentOptions o;
   o.prior_weight = opt_.prior_weight;
   WrittenParameters w;
@@ -35,7 +39,7 @@ WrittenParameters Diagnosis::consistent_parameters() const {
     // differences: least squares wrote the link masses 5.10 / 3.20 / 1.13 kg for 2.5 / 1.5 / 2.8).
     // Not through a recorded low-pass, where that noise is gone and the projection only costs
     // efficiency (the Panda: joint 7's rollouts 22.7 mrad two-stage, 21.0 one-stage, 22.0 shipped).
-    Eigen::MatrixXd Z(W.rows(), W.cols() + ne);
+    Eigen::MatrixXd Z(W.rows(), W.cols() + E.cols());
     Z.leftCols(W.cols()) = stacked_standard_regressor(*reg_, twin_->split.X, *twin_->cols, opt_.data + ": split " + fit_.name + " (simulated)");
     filter_stacked(twin_->sos, Z, twin_->N, twin_->runs);
     at = W.cols();
@@ -43,6 +47,10 @@ WrittenParameters Diagnosis::consistent_parameters() const {
       const BlockColumns c = columns_of(cands_[static_cast<size_t>(k)], *twin_);
       Z.middleCols(at, c.cols) = c.dense();
       at += c.cols;
+    }
+    if (offset.cols > 0) {
+      const BlockColumns zo = offset_column(*twin_);
+      Z.rightCols(offset.cols) = zo.cols == offset.cols ? zo.dense() : offset.dense();
     }
     const BlockColumns zb = BlockColumns::from_dense(Z, fit_.N, fit_.base.outputs);
     const Eigen::MatrixXd Q = fit_blocks({&zb}, Eigen::VectorXd::Zero(Z.rows()), true).Q();   // the span Z determines
@@ -53,7 +61,7 @@ WrittenParameters Diagnosis::consistent_parameters() const {
     w.id = fit_consistent(*reg_, W, fit_.b, o, E);
   }
   w.prediction_fit = W * w.id.pi;
-  if (ne > 0) w.prediction_fit += E * w.id.extra;
+  if (ne > 0) w.prediction_fit += E.leftCols(ne) * w.id.extra.head(ne);
   return w;
 }
 
