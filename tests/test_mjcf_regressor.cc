@@ -281,6 +281,60 @@ TEST(BaseParameters, Gen3AsShippedAndWithExactAnglesAgree) {
   expect_sane_base(exact, be, "gen3.urdf, exact angles");
 }
 
+// A written extended.xml of a realistic draw (RealisticDraws set 4, level 0 draw 3: four bodies
+// with full inertias, every regressor column finite): Eigen 3.4.0's divide-and-conquer SVD
+// indexed out of range while deflating its scaled regressor's singular values, returned NaN,
+// and the rank read 0 ("the regressor is zero in every sampled state"); the same chain as the
+// user gave it has 35 base parameters. Both must have the same count.
+TEST(BaseParameters, AWrittenChainKeepsItsRank) {
+  const char* kGiven = R"(<mujoco model="chain">
+  <option gravity="-4.34771 7.82439 -4.01404"/>
+  <worldbody>
+    <body name="b0" pos="0 0 0">
+      <joint name="j0" type="hinge" axis="-0.786377 -0.616807 -0.0340704" armature="0.05" damping="0.5"/>
+      <inertial pos="0.235261 -0.0102511 0" mass="1.10906" diaginertia="0.00387361241654 0.00492659168117 0.00462375540129"/>
+      <body name="b1" pos="0.307094 0 0">
+        <joint name="j1" type="hinge" axis="-0.0368234 -0.19436 -0.980239" armature="0.05" damping="0.5"/>
+        <inertial pos="0.184596 -0.0132685 0" mass="2.54603" diaginertia="0.0354823970157 0.0343277040882 0.0427010439454"/>
+        <body name="b2" pos="0.48307 0 0">
+          <joint name="j2" type="hinge" axis="-0.97415 -0.184182 0.130804" armature="0.05" damping="0.5"/>
+          <inertial pos="0.156548 -0.0122219 0" mass="2.53391" diaginertia="0.0256181613802 0.0295969800738 0.0334866270316"/>
+          <body name="b3" pos="0.203986 0 0">
+            <joint name="j3" type="hinge" axis="0.971162 0.238167 -0.0110008" armature="0.05" damping="0.5"/>
+            <inertial pos="0.236097 -0.027887 0" mass="1.35924" diaginertia="0.00714462261908 0.00565447151211 0.00568064257402"/>
+          </body>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>)";
+  const char* kWritten = R"(<mujoco model="chain">
+<option gravity="-4.34771 7.82439 -4.01404"/>
+<worldbody>
+<body name="b0" pos="0 0 0">
+<inertial pos="0.23516730783381493 -0.010175455594021342 -1.076259306245428e-05" mass="1.1183865432957292" fullinertia="0.003867181807636218 0.004919044262190406 0.0046186266390388225 -2.4966928862525488e-06 -1.6125157480867541e-07 -7.964360809710696e-08"/>
+<joint name="j0" type="hinge" axis="-0.786377 -0.616807 -0.0340704" armature="0.04997917647554042" damping="0.4971636111850916"/>
+<body name="b1" pos="0.307094 0 0">
+<inertial pos="0.18387238786456678 -0.01407091459414849 -0.0001926926839440487" mass="2.50194537041615" fullinertia="0.035336827351719544 0.03409754685316803 0.04285477417758385 -0.0004185034023105969 6.548554192613064e-05 -0.0003499548597976676"/>
+<joint name="j1" type="hinge" axis="-0.0368234 -0.19436 -0.980239" armature="0.05004356219084071" damping="0.49704203815445713"/>
+<body name="b2" pos="0.48307 0 0">
+<inertial pos="0.15697490648919765 -0.011739313486604024 0.00023375508146281117" mass="2.581419573057353" fullinertia="0.025708529490805772 0.02987199456529839 0.033056112509327815 -0.0004713215676260367 5.047760893856857e-05 0.00023792768510699552"/>
+<joint name="j2" type="hinge" axis="-0.97415 -0.184182 0.130804" armature="0.049833946489629466" damping="0.689956464870608"/>
+<body name="b3" pos="0.203986 0 0">
+<inertial pos="0.235884532167936 -0.029522916407179543 6.009520499269509e-05" mass="1.3373197025983692" fullinertia="0.007011401804276627 0.0052608787224500825 0.005957130396640142 -3.113113503509443e-06 -0.00017015686507012982 -3.537824871117231e-05"/>
+<joint name="j3" type="hinge" axis="0.971162 0.238167 -0.0110008" armature="0.05010993648345675" damping="0.49983997781978246"/>
+</body>
+</body>
+</body>
+</body>
+</worldbody>
+</mujoco>)";
+  const auto given = MjcfRegressor(write_model("chain_given.xml", kGiven)).base_parameters();
+  const auto written = MjcfRegressor(write_model("chain_written.xml", kWritten)).base_parameters();
+  EXPECT_TRUE(written.singular_values.allFinite());
+  EXPECT_EQ(written.rank, given.rank);
+}
+
 // Rounding every angle to 4 decimals, as URDF exporters do, leaves the rank as it is.
 // The same arm in millimetres (lengths x 1e3, inertias, armature and damping x 1e6, gravity
 // x 1e3): physically the same robot, so the same base parameters (values x 1e6).

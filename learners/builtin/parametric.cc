@@ -171,7 +171,7 @@ class SupportVectorRegression : public LinearModel {
   // the columns that are nearly 0 in training, and predicted 1.5e6 N m where they are not.
   static Eigen::MatrixXd excited_directions(const Eigen::MatrixXd& phi) {
     const Eigen::Index M = phi.cols();
-    Eigen::BDCSVD<Eigen::MatrixXd> svd(phi, Eigen::ComputeThinV);
+    Eigen::JacobiSVD<Eigen::MatrixXd> svd(phi, Eigen::ComputeThinV);   // not BDCSVD: see envs/base_parameters.cc
     svd.setThreshold(Eigen::NumTraits<double>::epsilon() * static_cast<double>(std::max(phi.rows(), M)));
     const Eigen::Index r = svd.rank();
     if (r == M) return Eigen::MatrixXd::Identity(M, M);
