@@ -354,9 +354,9 @@ void Diagnosis::decide_parameters() {
   // 3.8 times the truth, and `parameters` was named beside `stick_slip` on 7 of 24 draws.
   // The offset between torques and states is a shape parameter estimated from the same data,
   // and one below a millisecond is left uncorrected under three of its standard errors
-  // (delay.cc). Left where the search put it, the logger's half tick (-0.21 to -0.31 ms at 2-3
-  // standard errors) read as damping 0.479-0.495 for 0.5 on clean draws, 3.9 standard errors
-  // off, and `parameters` was named with rollouts worse than the model as given. So the base
+  // (delay.cc). Left where the search put it, the logger's half tick (-0.21 to -0.31 ms, 1.3-2.9
+  // standard errors) read as damping 0.479-0.495 for 0.5 on clean draws, up to 3.9 standard
+  // errors off, and `parameters` was named with rollouts worse than the model as given. So the base
   // parameters are those of a fit with the offset free beside them (to first order: the
   // model's torques differentiated in time as one more column), their standard errors grown
   // with it and with the keys.
