@@ -88,6 +88,7 @@ struct Candidate {
   bool profiled = false;                      // profile_once ran
   double written_scale = 1;                   // the written model's factor on its levels (refit_written_effects)
   std::vector<bool> at_edge;                  // per shape key: a side of it the plugin refuses at the fit (stateful_errors)
+  std::string loose_principal;                // profile_once: the level carrying most of its force, when the profile leaves it loose
 };
 
 bool is_stateful(const spml_force_plugin& p);   // #22: advance/reset and no regressor
@@ -313,7 +314,7 @@ class Diagnosis {
   bool beats_static(const Candidate& c, double bar, double rss) const;
   double static_bar(int joint, const std::vector<int>& order, const std::vector<int>& chosen, const Fit& before, const std::vector<int>& outs,
                     double bar, int except = -1) const;
-  BlockColumns key_columns(const Candidate& c) const;
+  BlockColumns key_columns(const Candidate& c, std::vector<size_t>* keys = nullptr) const;
   std::vector<double> scaled_keys(const Candidate& c, double a) const;
   bool scales_with_keys(const Candidate& c) const;
   void stateful_errors(Candidate& c, const Fit& current, const std::vector<double>& x) const;

@@ -222,6 +222,13 @@ void Diagnosis::forward_backward() {
                                       replaces ? rss_on(r_test, outs, test_.N) : std::numeric_limits<double>::infinity());
         if (std::isfinite(bar) && !gains_on_test(bar, rss, opt_.min_gain, rss_floor(test_.b))) continue;   // beats_static's least bar, before the costly profile
         profile_once(order[i], current);
+        if (!c.loose_principal.empty()) {   // not this effect (profile_once)
+          cands_[static_cast<size_t>(order[i])].skipped = true;
+          not_tried_.push_back({{"effect", c.plugin->name}, {"joint", c.joint_name},
+                                {"reason", "fitted by simulation, but the level that carries most of its force (" + c.loose_principal +
+                                               ") is not determined by the data (profile): not this effect"}});
+          continue;
+        }
         if (std::isfinite(bar) && !beats_static(c, bar, rss)) continue;
       }
       accepted = order[i];
