@@ -551,7 +551,7 @@ void Diagnosis::profile_once(int k, const Fit& current) {
   // named `stick_slip` with fc loose and sigma1 at the top of its range. Over about 180 fits on
   // LuGre draws the profile never left fc loose (fs often, reported not identifiable).
   std::vector<size_t> keys;
-  const BlockColumns G = key_columns(c, &keys);
+  const BlockColumns G = key_columns(c, &keys, level);   // the levels only: half the simulations
   const Eigen::MatrixXd D = G.dense();
   int principal = -1;
   double largest = 0;
@@ -704,8 +704,9 @@ void Diagnosis::stateful_errors(Candidate& c, const Fit& current, const std::vec
 // The derivatives of a stateful candidate's simulated force on the fit split with respect to
 // the logarithms of its keys (those above 0; central differences of 1 %, one-sided where the
 // plugin refuses a side): what its keys, fitted on the same data, may take from the base
-// parameters (decide_parameters).
-BlockColumns Diagnosis::key_columns(const Candidate& c, std::vector<size_t>* keys) const {
+// parameters (decide_parameters). `only`: the keys to differentiate (empty: all); `keys` gets
+// the key of each column.
+BlockColumns Diagnosis::key_columns(const Candidate& c, std::vector<size_t>* keys, const std::vector<bool>& only) const {
   std::vector<Eigen::VectorXd> cols;
   if (keys) keys->clear();
   const ForceAt simulated = [&](const std::vector<double>& y, Eigen::VectorXd& F) {
@@ -724,7 +725,7 @@ BlockColumns Diagnosis::key_columns(const Candidate& c, std::vector<size_t>* key
   Eigen::VectorXd F0;
   if (!simulated(x, F0)) return BlockColumns::from_dense(Eigen::MatrixXd(fit_.y0.size(), 0), fit_.N, static_cast<int>(fit_.y0.size() / fit_.N));
   for (size_t k = 0; k < x.size(); ++k) {
-    if (!(c.shape_values[k] > 0)) continue;
+    if (!(c.shape_values[k] > 0) || (!only.empty() && !only[k])) continue;
     bool edge = false;
     Eigen::VectorXd d = log_derivative(simulated, x, k, F0, &edge);
     if (!edge || d.squaredNorm() > 0) {   // none where the plugin refuses both sides
