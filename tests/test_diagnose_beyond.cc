@@ -482,18 +482,6 @@ TEST(DiagnoseBeyond, LuGreIsNamedOnRealisticDataAgainstTheStaticCandidates) {
   for (int s : {3, 0}) expect_stick_slip(dir, s, 0, BreakAway::within_20_or_said_free);
 }
 
-// Default-band draw 22: its fs is loose by the fit's own standard error (a stick of a few
-// hundredths of a rad/s and the true hump fit alike) beside a determined fc. That refused the
-// whole fit (settle_levels), and `coulomb` was named with 3.7 % of the joint's held-out error
-// left and an `unexplained` structure on its velocity; only the principal level (fc) refuses it
-// now, fs is reported not identifiable, and 0.49 % is left.
-TEST(DiagnoseBeyond, ALooseBreakAwayBesideADeterminedCoulombLevelIsReportedNotIdentifiable) {
-  const auto dir = test::temp_dir("lugre_loose_fs");
-  const auto r = expect_stick_slip(dir, 22, 0, BreakAway::within_20_or_said_free);
-  EXPECT_EQ(named(r).size(), 1u) << joined(named(r));
-  EXPECT_TRUE(r["unexplained"].empty()) << r["unexplained"].dump();
-}
-
 // A friction experiment: the same draws excited at 0.1-0.3 Hz, slow reversals along which the
 // friction climbs to its break-away force (a reversal at deceleration a climbs it when a is
 // below about sigma0 vs^2 / fs): fc and fs within 20 %, fs determined. At the default band

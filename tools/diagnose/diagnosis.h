@@ -315,7 +315,6 @@ class Diagnosis {
   double static_bar(int joint, const std::vector<int>& order, const std::vector<int>& chosen, const Fit& before, const std::vector<int>& outs,
                     double bar, int except = -1) const;
   BlockColumns key_columns(const Candidate& c, std::vector<size_t>* keys = nullptr, const std::vector<bool>& only = {}) const;
-  int principal_level(const Candidate& c, const std::vector<bool>& level) const;
   std::vector<double> scaled_keys(const Candidate& c, double a) const;
   bool scales_with_keys(const Candidate& c) const;
   void stateful_errors(Candidate& c, const Fit& current, const std::vector<double>& x) const;

@@ -459,11 +459,10 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
   // The levels must be what the data show: on clean data the fit drives fc and fs to nothing
   // and keeps only the bristle damping, a velocity lag that is not friction (a clean draw of
   // DiagnoseRealistic named stick_slip that way). A stateful candidate whose every level is
-  // undetermined, or whose principal level is beyond 50 % relative error, is not that effect.
-  // (Let through beside a determined one, loose levels named LuGre on three joints of the real
+  // undetermined, or with one it needs beyond 50 % relative error, is not that effect. (Let
+  // through beside a determined one, loose levels named LuGre on three joints of the real
   // Panda run, one of them with an fc of 0.013 and its written model's held-out error 48 %
-  // where Coulomb's had left 6 %; the Panda keeps its causes with only the principal level
-  // required, below.) A loose level on the edge of what the plugin accepts is
+  // where Coulomb's had left 6 %.) A loose level on the edge of what the plugin accepts is
   // the one exception: its force beyond the others is what the data do not show (LuGre's
   // fs = fc, no Stribeck hump: default-band draws 12 and 13, whose reversals hide the
   // break-away, had `coulomb` named where the stateful fit explained what Coulomb left). It is
@@ -479,16 +478,8 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
     if (determined(k)) ++determined_levels;
     else if (!at_edge) loose += std::string(loose.empty() ? "" : ", ") + c.shape[k]->key;
   }
-  // Of the loose levels, only the principal one refuses it: LuGre's fs left loose beside a
-  // determined fc is its break-away the data do not resolve, reported not identifiable, and the
-  // fit held to the higher bar of an unshaped one (shaped()). Refused, default-band LuGre draw
-  // 22 had `coulomb` named and an `unexplained` structure on its velocity left.
-  const int principal = loose.empty() ? -1 : principal_level(c, level);
-  const bool principal_loose = principal >= 0 && !determined(static_cast<size_t>(principal)) &&
-                               !(static_cast<size_t>(principal) < c.at_edge.size() && c.at_edge[static_cast<size_t>(principal)]);
-  if (determined_levels == 0 || principal_loose) {
-    refuse("levels (" + (principal_loose ? std::string(c.shape[static_cast<size_t>(principal)]->key) : std::string("all")) +
-           ") are not determined by the data: not this effect");
+  if (determined_levels == 0 || !loose.empty()) {
+    refuse("levels (" + (loose.empty() ? std::string("all") : loose) + ") are not determined by the data: not this effect");
     return;
   }
   // Nor is it when a shape key ran to the end of its declared range: the data push it beyond
@@ -542,19 +533,6 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
 // static candidates) is profiled first, once (profile_stateful, against `current`): the keys
 // equally good fits leave apart join its not_identifiable. Only then: profiling every joint's
 // fit tripled the arm's diagnose and the undecimated Panda's, where LuGre joins nowhere.
-// The level that carries most of the candidate's force along the log: the largest of its levels'
-// derivative columns (key_columns; LuGre's Coulomb level fc, which every sliding row shows, where
-// fs acts only near zero speed). -1 when it has none above 0.
-int Diagnosis::principal_level(const Candidate& c, const std::vector<bool>& level) const {
-  std::vector<size_t> keys;
-  const Eigen::MatrixXd D = key_columns(c, &keys, level).dense();   // the levels only
-  int principal = -1;
-  double largest = 0;
-  for (size_t j = 0; j < keys.size(); ++j)
-    if (const double norm = D.col(static_cast<Eigen::Index>(j)).norm(); norm > largest) largest = norm, principal = static_cast<int>(keys[j]);
-  return principal;
-}
-
 void Diagnosis::profile_once(int k, const Fit& current) {
   Candidate& c = cands_[static_cast<size_t>(k)];
   if (c.profiled) return;
@@ -565,13 +543,20 @@ void Diagnosis::profile_once(int k, const Fit& current) {
     x[k2] = std::clamp(std::log(std::max(c.shape_values[k2], 1e-300)), lb[k2], ub[k2]);   // a level declared 0 sits at its floor
   for (const auto& key : profile_stateful(c, current, level, lb, ub, x))
     if (std::find(c.not_identifiable.begin(), c.not_identifiable.end(), key) == c.not_identifiable.end()) c.not_identifiable.push_back(key);
-  // The principal level (principal_level) must be determined by the profile too. settle_levels
-  // judges it by its local standard error, before the profile runs; left loose here, a hidden
-  // Coulomb friction of 1.06 N m on a friction experiment (slow band, delay_coulomb seed 200,
-  // 2 and 3 % noise) was named `stick_slip` with fc loose and sigma1 at the top of its range.
-  // Over about 180 fits on LuGre draws the profile never left fc loose (fs often, reported not
-  // identifiable).
-  const int principal = principal_level(c, level);
+  // The level that carries most of the force along the log (the largest column of the keys'
+  // derivatives: LuGre's Coulomb level fc, which every sliding row shows, where fs acts only near
+  // zero speed) must be determined by the profile too. settle_levels refuses a loose level by its
+  // local standard error, before the profile runs; left loose here, a hidden Coulomb friction of
+  // 1.06 N m on a friction experiment (slow band, delay_coulomb seed 200, 2 and 3 % noise) was
+  // named `stick_slip` with fc loose and sigma1 at the top of its range. Over about 180 fits on
+  // LuGre draws the profile never left fc loose (fs often, reported not identifiable).
+  std::vector<size_t> keys;
+  const BlockColumns G = key_columns(c, &keys, level);   // the levels only: half the simulations
+  const Eigen::MatrixXd D = G.dense();
+  int principal = -1;
+  double largest = 0;
+  for (size_t j = 0; j < keys.size(); ++j)
+    if (level[keys[j]] && D.col(static_cast<Eigen::Index>(j)).norm() > largest) largest = D.col(static_cast<Eigen::Index>(j)).norm(), principal = static_cast<int>(keys[j]);
   if (principal < 0) return;
   const auto pk = static_cast<size_t>(principal);
   const bool loose = std::find(c.not_identifiable.begin(), c.not_identifiable.end(), c.shape[pk]->key) != c.not_identifiable.end();
