@@ -372,9 +372,10 @@ void Diagnosis::decide_parameters() {
   for (int k : effects)
     if (cands_[static_cast<size_t>(k)].stateful) keys.push_back(key_columns(cands_[static_cast<size_t>(k)]));
   std::vector<const BlockColumns*> with = blocks(effects, true);
+  const size_t unkeyed = with.size();
   for (const BlockColumns& g : keys)
     if (g.cols > 0) with.push_back(&g);
-  const bool keyed = with.size() > blocks(effects, true).size();
+  const bool keyed = with.size() > unkeyed;
   const Fit loose = keyed ? fit_blocks(with, fit_.y0, false, fit_.N) : free;
   // The offset's shift of the base parameters, with the keys free on both sides; the standard
   // errors grow by the larger of the two ratios: the robust error with the offset free can come

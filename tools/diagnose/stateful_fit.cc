@@ -550,17 +550,21 @@ void Diagnosis::profile_once(int k, const Fit& current) {
   // 1.06 N m on a friction experiment (slow band, delay_coulomb seed 200, 2 and 3 % noise) was
   // named `stick_slip` with fc loose and sigma1 at the top of its range. Over about 180 fits on
   // LuGre draws the profile never left fc loose (fs often, reported not identifiable).
+  // Its simulations are spent only where some level is loose and off the edge.
+  auto loose_off_edge = [&](size_t k) {
+    return std::find(c.not_identifiable.begin(), c.not_identifiable.end(), c.shape[k]->key) != c.not_identifiable.end() &&
+           !(k < c.at_edge.size() && c.at_edge[k]);
+  };
+  bool any = false;
+  for (size_t k = 0; k < level.size(); ++k) any = any || (level[k] && c.shape_values[k] > 0 && loose_off_edge(k));
+  if (!any) return;
   std::vector<size_t> keys;
-  const BlockColumns G = key_columns(c, &keys, level);   // the levels only: half the simulations
-  const Eigen::MatrixXd D = G.dense();
+  const Eigen::MatrixXd D = key_columns(c, &keys, level).dense();   // the levels only
   int principal = -1;
   double largest = 0;
   for (size_t j = 0; j < keys.size(); ++j)
-    if (level[keys[j]] && D.col(static_cast<Eigen::Index>(j)).norm() > largest) largest = D.col(static_cast<Eigen::Index>(j)).norm(), principal = static_cast<int>(keys[j]);
-  if (principal < 0) return;
-  const auto pk = static_cast<size_t>(principal);
-  const bool loose = std::find(c.not_identifiable.begin(), c.not_identifiable.end(), c.shape[pk]->key) != c.not_identifiable.end();
-  if (loose && !(pk < c.at_edge.size() && c.at_edge[pk])) c.loose_principal = c.shape[pk]->key;
+    if (const double norm = D.col(static_cast<Eigen::Index>(j)).norm(); norm > largest) largest = norm, principal = static_cast<int>(keys[j]);
+  if (principal >= 0 && loose_off_edge(static_cast<size_t>(principal))) c.loose_principal = c.shape[static_cast<size_t>(principal)]->key;
 }
 
 // Is the candidate's shape what the data show: one of its shape keys determined (not in
