@@ -802,3 +802,15 @@ TEST(DiagnoseDesign, ChunkedFactorizationIsOnePivotedQr) {
 
 }  // namespace
 }  // namespace spml
+
+// The family-wise bar of `parameters` (statistics.h): one test keeps three standard errors, k
+// tests at once each keep P(|Z| > z) = 1 - (1 - alpha)^(1/k), and the family errs with alpha.
+TEST(DiagnoseStatistics, TheFamilywiseBarKeepsTheFamilysFalseAlarmRate) {
+  const double alpha = std::erfc(3 / std::sqrt(2.0));   // 0.27 %
+  EXPECT_NEAR(spml::diagnose_detail::familywise_z(alpha, 1), 3.0, 1e-9);
+  for (int k : {2, 22, 60}) {
+    const double z = spml::diagnose_detail::familywise_z(alpha, k);
+    EXPECT_NEAR(1 - std::pow(1 - std::erfc(z / std::sqrt(2.0)), k), alpha, 1e-12) << k;
+  }
+  EXPECT_NEAR(spml::diagnose_detail::familywise_z(alpha, 22), 3.840, 5e-4);   // the random chains' rank
+}

@@ -86,8 +86,8 @@ nlohmann::json Diagnosis::parameters_cause(MjcfEdits& edits, std::vector<std::st
       undetermined.push_back(name);
       continue;
     }
-    // Contradicted: the estimate lies beyond three standard errors of the MJCF's value.
-    if (std::fabs(d) <= 3 * e) continue;
+    // Contradicted: the estimate lies beyond parameters_z_ standard errors of the MJCF's value.
+    if (std::fabs(d) <= parameters_z_ * e) continue;
     params[name] = base_.model_values[i] + d;
     se[name] = e;
     prior[name] = base_.model_values[i];
@@ -105,7 +105,7 @@ nlohmann::json Diagnosis::parameters_cause(MjcfEdits& edits, std::vector<std::st
   parameters_partial_ = notes.size() > before;
   edits.joint_attributes = id_edits.joint_attributes;
   edits.inertials = id_edits.inertials;
-  j["written"] = written_parameters_json(*written_);
+  j["written"] = written_parameters_json(*written_, out_joints_);
   return j;
 }
 
@@ -236,6 +236,7 @@ void Diagnosis::build_report(const std::string& out_dir) {
   R["statistics"] = {{"standard_errors", "autocorrelation-robust (batch means, Andrews bandwidth)"},
                      {"equations", fit_.y0.size()}, {"parameters_n_eff", parameters_n_eff_},
                      {"parameters_delta_bic", parameters_delta_bic_}, {"parameters_contradicted", parameters_contradicted_},
+                     {"parameters_z", parameters_z_},
                      {"estimator", {{"parameters", parameters_estimator_.empty() ? "ls" : parameters_estimator_}, {"effects", "ls"}}}};
   if (!instruments_.is_null()) R["statistics"]["estimator"]["instruments"] = instruments_;
   const bool free = parameters_named_;

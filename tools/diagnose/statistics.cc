@@ -48,4 +48,15 @@ Eigen::MatrixXd long_run_covariance(const Eigen::MatrixXd& Z, const Eigen::Vecto
   return S;
 }
 
+double familywise_z(double alpha, int k) {
+  const double each = -std::expm1(std::log1p(-alpha) / std::max(k, 1));   // 1 - (1 - alpha)^(1/k), without cancellation
+  // P(|Z| > z) = erfc(z / sqrt 2) falls monotonically: bisect it.
+  double lo = 0, hi = 40;
+  for (int it = 0; it < 100; ++it) {
+    const double mid = 0.5 * (lo + hi);
+    (std::erfc(mid / std::sqrt(2.0)) > each ? lo : hi) = mid;
+  }
+  return 0.5 * (lo + hi);
+}
+
 }  // namespace spml::diagnose_detail

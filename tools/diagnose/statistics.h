@@ -22,4 +22,8 @@ double effective_fraction(const Eigen::VectorXd& r, Eigen::Index N);
 // batch means with each output's block length from its residual segment.
 Eigen::MatrixXd long_run_covariance(const Eigen::MatrixXd& Z, const Eigen::VectorXd& r, Eigen::Index N);
 
+// The two-sided normal bound z that each of k independent tests must pass for the family to
+// err with probability alpha: P(|Z| > z) = 1 - (1 - alpha)^(1/k) (Sidak).
+double familywise_z(double alpha, int k);
+
 }  // namespace spml::diagnose_detail
