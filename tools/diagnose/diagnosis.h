@@ -150,9 +150,8 @@ struct WrittenParameters {
   ConsistentIdentification id;      // standard parameters; id.extra: the kept effects' coefficients
   Eigen::VectorXd prediction_fit;   // its torques on the fit split (through the parallel filter)
   bool two_stage = false;           // fitted on the columns projected onto the iv instruments
-  Eigen::VectorXd joint_weights;    // each joint's row weight in that fit (design.h: output_weights)
 };
-nlohmann::json written_parameters_json(const WrittenParameters& w, const std::vector<std::string>& joints);
+nlohmann::json written_parameters_json(const WrittenParameters& w);
 
 // The edits as extended.xml holds them (written_form.cc): diagnosed `spring` and `viscous`
 // declarations turned into the joint's stiffness/springref and damping.

@@ -394,7 +394,7 @@ void Diagnosis::decide_parameters() {
   // one test (0.27 % false alarms), and the bar each must pass is raised so that the whole
   // model errs that rarely (Sidak; 3.84 for the 22 of a random 3-joint chain). At three
   // standard errors each, 9 of 160 clean draws had `parameters` named on a largest deviation
-  // of 3.1-3.9 standard errors, where a 10 % error of one damping stands 7.6-280 off.
+  // of 3.1-3.9 standard errors, where damping errors of 10-40 % stand 7.6-2400 off.
   const int tests = static_cast<int>(std::count(parameters_fit_.determined.begin(), parameters_fit_.determined.begin() + base_.rank, true));
   parameters_z_ = familywise_z(std::erfc(3 / std::sqrt(2.0)), tests);
   parameters_contradicted_ = 0;

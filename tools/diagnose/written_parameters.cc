@@ -31,19 +31,6 @@ WrittenParameters Diagnosis::consistent_parameters() const {
   ConsistentOptions o;
   o.prior_weight = opt_.prior_weight;
   WrittenParameters w;
-  // Each joint's rows weighted by the inverse of its residual's RMS in the unweighted free fit
-  // (design.h: output_weights). Unweighted, what is written is fitted in N m, where a small
-  // joint's rows weigh nothing beside a large one's: on clean draws where `parameters` was
-  // named, the written model predicted the smallest joint's held-out torque worse (0.00181 ->
-  // 0.00244 relative on seed 212, 1 %/18 bit). The decision itself stays unweighted: weighted,
-  // the smallest joint's parameters come out precise enough to contradict the MJCF by the
-  // simulator's own implicit damping (armature + h damping, MuJoCo's Euler step: the planar
-  // arm's joint2 armature 1.0087 +- 0.0015 for 1, on data the MJCF generated).
-  w.joint_weights = output_weights(refit(effects, true).residual, fit_.N);
-  Eigen::MatrixXd Ww = W, Ew = E;
-  scale_outputs_in_place(Ww, w.joint_weights, fit_.N);
-  scale_outputs_in_place(Ew, w.joint_weights, fit_.N);
-  const Eigen::VectorXd bw = scale_outputs(fit_.b, w.joint_weights, fit_.N);
   if (twin_ && filter_plan_.source != FilterPlan::Source::recorded) {
     // Two-stage least squares, the consistent fit's form of the IV estimate that named
     // `parameters`: the columns are replaced by their projections onto the instruments' span
@@ -65,14 +52,13 @@ WrittenParameters Diagnosis::consistent_parameters() const {
       const BlockColumns zo = offset_column(*twin_);
       Z.rightCols(offset.cols) = zo.cols == offset.cols ? zo.dense() : offset.dense();
     }
-    scale_outputs_in_place(Z, w.joint_weights, fit_.N);
     const BlockColumns zb = BlockColumns::from_dense(Z, fit_.N, fit_.base.outputs);
     const Eigen::MatrixXd Q = fit_blocks({&zb}, Eigen::VectorXd::Zero(Z.rows()), true).Q();   // the span Z determines
-    const Eigen::MatrixXd Wp = Q * (Q.transpose() * Ww), Ep = Q * (Q.transpose() * Ew);
-    w.id = fit_consistent(*reg_, Wp, bw, o, Ep);
+    const Eigen::MatrixXd Wp = Q * (Q.transpose() * W), Ep = Q * (Q.transpose() * E);
+    w.id = fit_consistent(*reg_, Wp, fit_.b, o, Ep);
     w.two_stage = true;
   } else {
-    w.id = fit_consistent(*reg_, Ww, bw, o, Ew);
+    w.id = fit_consistent(*reg_, W, fit_.b, o, E);
   }
   w.prediction_fit = W * w.id.pi;
   if (ne > 0) w.prediction_fit += E.leftCols(ne) * w.id.extra.head(ne);
@@ -80,7 +66,7 @@ WrittenParameters Diagnosis::consistent_parameters() const {
 }
 
 // What report.json says about the written parameters (the `parameters` cause's "written").
-nlohmann::json written_parameters_json(const WrittenParameters& w, const std::vector<std::string>& joints) {
+nlohmann::json written_parameters_json(const WrittenParameters& w) {
   const ConsistentIdentification& id = w.id;
   nlohmann::json bodies = nlohmann::json::object(), terms = nlohmann::json::object();
   for (const auto& b : id.bodies) {
@@ -92,10 +78,7 @@ nlohmann::json written_parameters_json(const WrittenParameters& w, const std::ve
   }
   for (const auto& t : id.terms)
     if (t.fitted) terms[t.name] = {{"value", t.value}, {"prior", t.prior}, {"std_error", t.std_error}};
-  nlohmann::json weights = nlohmann::json::object();
-  for (size_t o = 0; o < joints.size() && static_cast<Eigen::Index>(o) < w.joint_weights.size(); ++o)
-    weights[joints[o]] = w.joint_weights[static_cast<Eigen::Index>(o)];
-  return {{"joint_weights", weights}, {"estimator", w.two_stage ? "consistent, two-stage (instruments of iv)" : "consistent"}, {"prior_weight", id.prior_weight}, {"bodies", bodies}, {"terms", terms},
+  return {{"estimator", w.two_stage ? "consistent, two-stage (instruments of iv)" : "consistent"}, {"prior_weight", id.prior_weight}, {"bodies", bodies}, {"terms", terms},
           {"evaluations", id.evaluations}, {"stop", id.stop}, {"seconds", id.seconds}};
 }
 
