@@ -355,4 +355,27 @@ Eigen::VectorXd predict_blocks(const std::vector<const BlockColumns*>& blocks, c
   return out;
 }
 
+Eigen::VectorXd output_weights(const Eigen::VectorXd& r, Eigen::Index N) {
+  const Eigen::Index outputs = N > 0 ? r.size() / N : 0;
+  Eigen::VectorXd sigma(outputs), w = Eigen::VectorXd::Ones(outputs);
+  for (Eigen::Index o = 0; o < outputs; ++o) sigma[o] = std::sqrt(r.segment(o * N, N).squaredNorm() / static_cast<double>(N));
+  const double all = outputs > 0 ? std::sqrt(sigma.squaredNorm() / static_cast<double>(outputs)) : 0;
+  if (!(all > 0) || !std::isfinite(all)) return w;
+  for (Eigen::Index o = 0; o < outputs; ++o) w[o] = all / std::max(sigma[o], 1e-3 * all);
+  // Normalised so that the residual r keeps its sum of squares: sum_o w_o^2 sigma_o^2 = sum_o sigma_o^2.
+  double weighted = 0;
+  for (Eigen::Index o = 0; o < outputs; ++o) weighted += w[o] * w[o] * sigma[o] * sigma[o];
+  return weighted > 0 ? Eigen::VectorXd(w * std::sqrt(sigma.squaredNorm() / weighted)) : w;
+}
+
+Eigen::VectorXd scale_outputs(const Eigen::VectorXd& y, const Eigen::VectorXd& w, Eigen::Index N) {
+  Eigen::VectorXd out = y;
+  for (Eigen::Index o = 0; o < w.size() && (o + 1) * N <= out.size(); ++o) out.segment(o * N, N) *= w[o];
+  return out;
+}
+
+void scale_outputs_in_place(Eigen::MatrixXd& M, const Eigen::VectorXd& w, Eigen::Index N) {
+  for (Eigen::Index o = 0; o < w.size() && (o + 1) * N <= M.rows(); ++o) M.middleRows(o * N, N) *= w[o];
+}
+
 }  // namespace spml::diagnose_detail

@@ -103,6 +103,16 @@ struct Gain {
 };
 Gain gain_of(const BlockColumns& C, const Eigen::MatrixXd& Q, const Eigen::VectorXd& r);
 
+// Weighted least squares across outputs (joints): each output's rows scaled by w[o]. A stacked
+// fit in N m weighs a wrist joint's rows by nothing beside a base joint's hundredfold torque, and
+// the parameters the wrist's torque alone pins down follow the base joint's noise instead
+// (written_parameters.cc says where that wrote a worse model).
+// The weights: sigma / sigma_o, sigma_o the RMS of residual r on output o (floored at 1e-3
+// sigma), sigma the RMS over all rows, so that a residual of that shape keeps its sum of squares.
+Eigen::VectorXd output_weights(const Eigen::VectorXd& r, Eigen::Index rows_per_output);
+Eigen::VectorXd scale_outputs(const Eigen::VectorXd& y, const Eigen::VectorXd& w, Eigen::Index rows_per_output);
+void scale_outputs_in_place(Eigen::MatrixXd& M, const Eigen::VectorXd& w, Eigen::Index rows_per_output);
+
 // The prediction of blocks with coefficients coef (concatenated in block order).
 Eigen::VectorXd predict_blocks(const std::vector<const BlockColumns*>& blocks, const Eigen::VectorXd& coef,
                                Eigen::Index rows);

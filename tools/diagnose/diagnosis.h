@@ -150,8 +150,9 @@ struct WrittenParameters {
   ConsistentIdentification id;      // standard parameters; id.extra: the kept effects' coefficients
   Eigen::VectorXd prediction_fit;   // its torques on the fit split (through the parallel filter)
   bool two_stage = false;           // fitted on the columns projected onto the iv instruments
+  Eigen::VectorXd joint_weights;    // each joint's row weight in that fit (design.h: output_weights)
 };
-nlohmann::json written_parameters_json(const WrittenParameters& w);
+nlohmann::json written_parameters_json(const WrittenParameters& w, const std::vector<std::string>& joints);
 
 // The edits as extended.xml holds them (written_form.cc): diagnosed `spring` and `viscous`
 // declarations turned into the joint's stiffness/springref and damping.
@@ -330,7 +331,7 @@ class Diagnosis {
   void choose_partial(const std::string& ext_path, MjcfEdits& edits, std::vector<std::string>& notes,
                       std::pair<Eigen::VectorXd, Eigen::VectorXd>& written);
   bool refit_written_effects(const std::string& ext_path, MjcfEdits& edits, std::vector<std::string>& notes);
-  void guard_held_out(const std::string& ext_path, MjcfEdits& edits, std::vector<std::string>& notes,
+  bool guard_held_out(const std::string& ext_path, MjcfEdits& edits, std::vector<std::string>& notes,
                       std::pair<Eigen::VectorXd, Eigen::VectorXd>& written);
   void run_rollouts(const std::string& ext_path, const std::string& out_dir, std::vector<std::string>& notes);
   Eigen::VectorXd written_prediction(const MjcfRegressor& ext, const MjcfRegressor::Base& ebase, const SplitData& s) const;
@@ -353,6 +354,7 @@ class Diagnosis {
   bool parameters_named_ = false;
   double parameters_delta_bic_ = 0, parameters_n_eff_ = 0;
   int parameters_contradicted_ = 0;
+  Eigen::VectorXd written_weights_;     // decide_parameters: each output's row weight in the written fit (design.h: output_weights)
   double parameters_z_ = 3;             // the standard errors beyond which a base parameter contradicts the MJCF (decide_parameters)
   Fit parameters_fit_;                  // the free fit whose estimates decide `parameters` (ls or iv)
   std::string parameters_estimator_;    // "ls" or "iv", as it ran

@@ -351,6 +351,7 @@ void Diagnosis::decide_parameters() {
   const Fit free = refit(effects, true, true), fixed = refit(effects, false);
   const double n = static_cast<double>(fit_.y0.size());
   parameters_n_eff_ = n * effective_fraction(free.residual, fit_.N);
+  written_weights_ = output_weights(free.residual, fit_.N);
   parameters_delta_bic_ = delta_bic(parameters_n_eff_, fixed.rss, free.rss, free.rank - fixed.rank, rss_floor(fit_.b));
   parameters_fit_ = opt_.estimator == "iv" ? iv_refit(effects) : free;
   // The stateful causes' keys were fitted on the same data, and a base parameter they can stand
