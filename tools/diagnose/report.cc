@@ -66,6 +66,8 @@ std::string report_summary(const nlohmann::json& r) {
     s << "  " << ++rank << ". " << c["effect"].get<std::string>();
     if (c["effect"] == "delay") s << " " << num(1e3 * c["params"]["seconds"].get<double>()) << " ms";   // #22
     else if (c["effect"] != "parameters") s << " on " << c["joints"][0].get<std::string>();
+    else if (r.contains("statistics") && r["statistics"].contains("parameters_z"))   // the family-wise bar (selection.cc)
+      s << " (" << c["params"].size() << " beyond " << num(r["statistics"]["parameters_z"].get<double>(), 3) << " standard errors)";
     s << "  (dBIC " << num(c["delta_bic"].get<double>(), 5) << ", test error after " << pct(c["rel_error_test_after_all"].get<double>()) << ")";
     if (c.contains("superseded_by")) s << "  superseded by " << c["superseded_by"].get<std::string>();
     if (c.contains("rejected")) s << "  REJECTED: " << c["rejected"].value("summary", "in simulation, rollouts worse with it");

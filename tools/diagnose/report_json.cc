@@ -70,8 +70,8 @@ nlohmann::json Diagnosis::cross_errors(const std::vector<int>& causes, bool base
   return out;
 }
 
-// The `parameters` cause: the base parameters beyond three standard errors of the MJCF's
-// values, and the MJCF edits that carry them.
+// The `parameters` cause: the base parameters beyond parameters_z_ standard errors of the
+// MJCF's values (the family-wise bar, decide_parameters), and the MJCF edits that carry them.
 nlohmann::json Diagnosis::parameters_cause(MjcfEdits& edits, std::vector<std::string>& notes) const {
   const Fit pf = refit({}, true);
   nlohmann::json params = nlohmann::json::object(), se = nlohmann::json::object(), prior = nlohmann::json::object();
