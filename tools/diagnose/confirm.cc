@@ -270,16 +270,7 @@ bool Diagnosis::guard_held_out(const std::string& ext_path, MjcfEdits& edits, st
   // Under the first alone, an end stop on a base joint read as its links' mass moments was
   // written with the other joints' held-out torque 2.5-5 times worse (geometric mean), and
   // cubic damping as the joints' damping with them 1.2-5.9 times worse, on 20 of 60 draws.
-  auto per_joint = [&] {   // the geometric mean over joints of written / as given (sums of squares)
-    const Eigen::VectorXd r = test_.b - written.second;
-    double log_ratio = 0;
-    Eigen::Index outputs = 0;
-    for (Eigen::Index o = 0; (o + 1) * test_.N <= r.size(); ++o, ++outputs) {
-      const double floor = std::max(rss_floor(test_.b.segment(o * test_.N, test_.N)), 1e-300);
-      log_ratio += std::log((r.segment(o * test_.N, test_.N).squaredNorm() + floor) / (test_.y0.segment(o * test_.N, test_.N).squaredNorm() + floor));
-    }
-    return outputs > 0 ? std::exp(log_ratio / static_cast<double>(outputs)) : 1.0;
-  };
+  auto per_joint = [&] { return per_output_ratio(test_.b - written.second, test_.y0, test_.b, test_.N); };
   auto worse = [&] { return (test_.b - written.second).squaredNorm() > given + rss_floor(test_.b) || per_joint() > 1 + 1e-9; };
   if (!worse()) return false;
   const std::string why = "the written model predicts the held-out split '" + test_name_ + "' worse (relative error " +

@@ -189,6 +189,11 @@ double delta_bic(double n, double rss_smaller, double rss_larger, double dk, dou
 // (sums below `floor` count as `floor`).
 bool gains_on_test(double rss_before, double rss_after, double min_gain, double floor);
 
+// The held-out likelihood with one noise variance per joint: the geometric mean over outputs
+// (N rows each) of the residual `after`'s sum of squares relative to `before`'s, each output's
+// sums below the rounding level of its part of b counting as that level; 1 for no outputs.
+double per_output_ratio(const Eigen::VectorXd& after, const Eigen::VectorXd& before, const Eigen::VectorXd& b, Eigen::Index N);
+
 // The rounding level of a stacked target b: (1e-8 |b|)^2, far below any measured residual.
 inline double rss_floor(const Eigen::VectorXd& b) { return 1e-16 * b.squaredNorm(); }
 

@@ -21,6 +21,16 @@ bool gains_on_test(double rss_before, double rss_after, double min_gain, double 
   return rss_before > 0 && (rss_before - rss_after) / rss_before >= min_gain;
 }
 
+double per_output_ratio(const Eigen::VectorXd& after, const Eigen::VectorXd& before, const Eigen::VectorXd& b, Eigen::Index N) {
+  const Eigen::Index outputs = N > 0 ? before.size() / N : 0;
+  double log_ratio = 0;
+  for (Eigen::Index o = 0; o < outputs; ++o) {
+    const double floor = std::max(rss_floor(b.segment(o * N, N)), 1e-300);
+    log_ratio += std::log(std::max(after.segment(o * N, N).squaredNorm(), floor) / std::max(before.segment(o * N, N).squaredNorm(), floor));
+  }
+  return outputs > 0 ? std::exp(log_ratio / static_cast<double>(outputs)) : 1.0;
+}
+
 std::vector<int> Diagnosis::kept_effects() const {
   std::vector<int> out;
   for (const auto& c : causes_)
@@ -410,15 +420,8 @@ void Diagnosis::decide_parameters() {
   // the first only (viscous on a base joint: 99.9 % less on it, a 0.004 N m residual five times
   // larger on the last joint).
   const Eigen::VectorXd before = residual_on(test_, effects, false, fixed), after = residual_on(test_, effects, true, free);
-  const Eigen::Index outputs = before.size() / test_.N;
-  double log_ratio = 0;
-  for (Eigen::Index o = 0; o < outputs; ++o) {
-    const double floor = std::max(rss_floor(test_.b.segment(o * test_.N, test_.N)), 1e-300);
-    log_ratio += std::log(std::max(after.segment(o * test_.N, test_.N).squaredNorm(), floor) /
-                          std::max(before.segment(o * test_.N, test_.N).squaredNorm(), floor));
-  }
   const bool gains = gains_on_test(before.squaredNorm(), after.squaredNorm(), opt_.min_gain, rss_floor(test_.b)) ||
-                     (outputs > 0 && gains_on_test(1, std::exp(log_ratio / static_cast<double>(outputs)), opt_.min_gain, 0));
+                     (before.size() >= test_.N && gains_on_test(1, per_output_ratio(after, before, test_.b, test_.N), opt_.min_gain, 0));
   const bool evidence = parameters_delta_bic_ > opt_.bic_threshold && gains;
   parameters_named_ = evidence && parameters_contradicted_ > 0;
   // The causes were chosen with the base parameters refitted; without `parameters` the model
