@@ -49,6 +49,11 @@ inline double since(Clock::time_point t0) { return std::chrono::duration<double>
 std::string fmt(double v, int precision = 4);
 std::string integer_text(double v);
 
+// A model as given (or one of its declared forces) predicting torques this many times the
+// measured ones' RMS is refused: a value off by orders of magnitude leaves nothing to diagnose,
+// and beyond it squares overflow and every score is NaN.
+constexpr double kAbsurdTorqueRatio = 1e6;
+
 // One split as diagnose uses it: its rows, the stacked base regressor, the stacked torques and
 // what the model as given predicts.
 struct SplitData {

@@ -10,6 +10,9 @@ namespace spml::diagnose_detail {
 
 // Rows a fit or test split needs at the least (uniform steps, differences, a hold-out).
 constexpr Eigen::Index kMinRows = 10;
+// A declared force this many times the measured torques' RMS is said (a warning): a value off by
+// orders of magnitude, not a model to diagnose.
+constexpr double kImplausibleForce = 1e3;
 
 void Diagnosis::load() {
   RegressorOptions ro;
@@ -190,6 +193,18 @@ void Diagnosis::add_declared_forces(const SplitData& s, Eigen::VectorXd& into) c
   for (const auto& in : declared_->instances()) {
     if (in.plugin().regressor) continue;
     const Eigen::VectorXd f = simulated_columns(in.object, s).dense().col(0);
+    // A declaration the plugin accepts can still overflow along a log (LuGre with sigma1 = 1e300:
+    // a force of 1e299, whose squares are inf and every score after them NaN; a review's draw
+    // crashed on it).
+    const double rms_torque = std::sqrt(s.b.squaredNorm() / static_cast<double>(std::max<Eigen::Index>(s.b.size(), 1)));
+    const double peak = f.size() ? f.cwiseAbs().maxCoeff() : 0.0;
+    const std::string what = opt_.model + ": " + in.decl.element + " (" + in.decl.type + "): its force along split '" + s.name + "' of " + opt_.data;
+    if (!(peak <= kAbsurdTorqueRatio * rms_torque))
+      throw DatasetError(what + " reaches " + fmt(peak) + " (" + fmt(kAbsurdTorqueRatio) + " times the measured torques' RMS, " + fmt(rms_torque) +
+                         ", or more, or not finite): the declared values are off by orders of magnitude");
+    if (peak > kImplausibleForce * rms_torque)
+      std::cerr << "spml: warning: " << what << " reaches " << fmt(peak) << ", " << fmt(kImplausibleForce)
+                << " times the measured torques' RMS or more: the model as given will be far from the data (check the declared values)\n";
     if (into.size()) into += f;
     else into = f;
   }

@@ -41,6 +41,13 @@ SplitData Diagnosis::prepare(const Split& s, const std::vector<Eigen::Index>& ru
   add_declared_forces(d, d.friction);
   d.given = d.base.times(base_.model_values);
   if (d.friction.size()) d.given += d.friction;
+  const double rms_torque = std::sqrt(d.b.squaredNorm() / static_cast<double>(std::max<Eigen::Index>(d.b.size(), 1)));
+  for (Eigen::Index i = 0; i < d.given.size(); ++i)
+    if (!(std::fabs(d.given[i]) <= kAbsurdTorqueRatio * rms_torque))
+      throw DatasetError(opt_.model + ": the model as given predicts " + fmt(d.given[i]) + " on split '" + s.name + "' of " + opt_.data +
+                         " (row " + std::to_string(i % d.N) + ", torque column '" + s.y_columns[static_cast<size_t>(i / d.N)] +
+                         "'), " + fmt(kAbsurdTorqueRatio) + " times the measured torques' RMS (" + fmt(rms_torque) + ") or more: a declared value (a plugin's, "
+                         "a joint's, a body's) is off by orders of magnitude");
   d.y0 = d.b - d.given;
   apply_filter(d);
   return d;
