@@ -209,6 +209,25 @@ TEST(Hardening, ADeclaredForceOrdersOfMagnitudeOffIsRefused) {
   }
 }
 
+// Too few samples dropped after a low-pass, from a log that ends moving: the import says how
+// far the start-up transient reaches (20 Hz, order 4, at 1 kHz: 307 samples); enough dropped,
+// nothing is said.
+TEST(Hardening, ImportSaysHowManyEdgeSamplesTheFiltersSpoil) {
+  {
+    std::ofstream log(f("moving.csv"));
+    log << "t,q:j,tau:j\n";
+    for (int i = 0; i < 3000; ++i) log << i * 1e-3 << "," << std::sin(8.0 * i * 1e-3) << "," << std::cos(8.0 * i * 1e-3) << "\n";
+  }
+  const std::string import = spml("import " + f("moving.csv") + " --t t --x q:j --y tau:j --lowpass 20 --derive -o " + f("moving.h5") + " --drop-edges ");
+  const auto few = run(import + "50");
+  EXPECT_EQ(few.exit_code, 0) << few.output;
+  EXPECT_NE(few.output.find("moving.csv: --drop-edges 50 keeps part of the low-pass's start-up transient"), std::string::npos) << few.output;
+  EXPECT_NE(few.output.find("which reaches 307 samples (0.307 s) into each end of the log: drop at least 307"), std::string::npos) << few.output;
+  const auto enough = run(import + "307");
+  EXPECT_EQ(enough.exit_code, 0) << enough.output;
+  EXPECT_EQ(enough.output.find("warning"), std::string::npos) << enough.output;
+}
+
 // Output that never reached its file is a failure: a --json document into a full device.
 TEST(Hardening, StandardOutputThatCannotBeWrittenIsAnError) {
   if (!fs::exists("/dev/full")) GTEST_SKIP() << "no /dev/full on this machine";

@@ -48,10 +48,29 @@ void cascade(const std::vector<Section>& sos, std::vector<double>& x) {
 
 }  // namespace
 
-Eigen::VectorXd filtfilt(const std::vector<Section>& sos, const Eigen::VectorXd& x) {
+Eigen::Index settling_samples(const std::vector<Section>& sos) {
+  // The cascade's impulse response, on a record doubled until its last sample above 1e-6 of
+  // the peak lies in the record's first half (a low cut-off rings for many samples).
+  constexpr Eigen::Index kMax = 1 << 20;
+  std::vector<double> h(256, 0.0);
+  h[1] = 1.0;   // after a zero: the cascade starts at rest
+  for (;;) {
+    std::vector<double> y = h;
+    cascade(sos, y);
+    double peak = 0;
+    for (double v : y) peak = std::max(peak, std::fabs(v));
+    Eigen::Index last = 0;
+    for (size_t i = 0; i < y.size(); ++i)
+      if (std::fabs(y[i]) > 1e-6 * peak) last = static_cast<Eigen::Index>(i);
+    if (2 * last < static_cast<Eigen::Index>(y.size()) || static_cast<Eigen::Index>(y.size()) >= kMax) return last + 1;
+    h.resize(2 * h.size(), 0.0);
+  }
+}
+
+Eigen::VectorXd filtfilt(const std::vector<Section>& sos, const Eigen::VectorXd& x, Eigen::Index reflect) {
   const Eigen::Index n = x.size();
   if (n < 2) return x;
-  const Eigen::Index pad = std::min<Eigen::Index>(n - 1, 3 * 2 * static_cast<Eigen::Index>(sos.size()));
+  const Eigen::Index pad = std::min<Eigen::Index>(n - 1, reflect >= 0 ? reflect : 3 * 2 * static_cast<Eigen::Index>(sos.size()));
   std::vector<double> ext;
   ext.reserve(static_cast<size_t>(n + 2 * pad));
   for (Eigen::Index i = pad; i >= 1; --i) ext.push_back(2.0 * x[0] - x[i]);            // odd reflection

@@ -10,6 +10,7 @@
 #include "spml/envs/scenarios.h"
 #include "spml/output_guard.h"
 #include "spml/parse.h"
+#include "spml/signal.h"
 
 namespace spml::cli {
 namespace {
@@ -93,8 +94,9 @@ void generate_model(const ModelArgs& a, const std::string& out, std::uint64_t se
   if (csv) {
     std::string q, tau;
     for (const auto& j : run.joints) q += (q.empty() ? "" : ",") + ("q:" + j), tau += (tau.empty() ? "" : ",") + ("tau:" + j);
+    // Edges dropped over the low-pass's settling: a generated run ends moving (import warns).
     std::cout << "next: spml import " << shell_quote(out) << " --t t --x " << shell_quote(q) << " --y " << shell_quote(tau)
-              << " --lowpass 10 --derive --drop-edges " << static_cast<int>(std::ceil(0.1 * o.rate)) << " --out DATA.h5\n";
+              << " --lowpass 10 --derive --drop-edges " << (o.rate > 20 ? settling_samples(butterworth_lowpass(4, 10, o.rate)) : 0) << " --out DATA.h5\n";
   }
 }
 

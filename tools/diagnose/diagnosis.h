@@ -10,7 +10,7 @@
 //   selection.cc   forward selection, backward elimination, the `parameters` decision
 //   written_parameters.cc  the physically consistent parameters extended.xml states
 //   written_form.cc  a spring and viscous friction written as MuJoCo's stiffness/springref and damping
-//   confirm.cc     causes whose written form makes rollouts worse beyond noise are rejected
+//   confirm.cc     causes whose written form makes rollouts worse (and whose removal mends them) are rejected
 //   verify.cc      the written model: extended.xml, its own inverse dynamics, rollouts (rollouts.csv)
 //   report_json.cc report.json (causes, metrics, cross-tests) and series.csv
 // Issue #22 (stages of their own, hooked in where marked "#22"):
@@ -298,7 +298,7 @@ class Diagnosis {
   Selection choose_again(const Selection& fresh);
   void restore(Selection&& s);
   void swap_delay();
-  void drop_delay();
+  void drop_delay(bool rivals);
   double free_parameters(const std::vector<int>& causes, const Fit& f) const;
   nlohmann::json delay_report() const;
   nlohmann::json delay_cause() const;

@@ -158,7 +158,7 @@ void Diagnosis::choose(const Selection& fresh) {
   const bool delay_wins = delta_bic(n_eff, fb.residual.cwiseProduct(wf).squaredNorm(), ra.squaredNorm(), k_a - free_parameters(kept_b, fb),
                                     rss_floor(fit_.b)) > opt_.bic_threshold &&
                           gains_on_test(test_b, test_a, std::max(opt_.min_gain, kMinDelayGain), rss_floor(test_.b));
-  if (!delay_wins) return drop_delay();
+  if (!delay_wins) return drop_delay(!kept_b.empty());
   swap_delay();
   restore(std::move(corrected));
 }

@@ -16,10 +16,16 @@ namespace spml {
 std::vector<Eigen::Matrix<double, 5, 1>> butterworth_lowpass(int order, double cutoff_hz, double rate_hz);
 
 // Forward-backward (zero-phase) filtering with the sections above; the signal is extended
-// at both ends by odd reflection (3 * order samples, fewer for short signals) and every
+// at both ends by odd reflection (3 * order samples, or `reflect` when >= 0; fewer for short
+// signals) and every
 // section starts in its steady state for the first sample, so the ends do not ring.
 // The magnitude response is squared: -6 dB at the cut-off.
-Eigen::VectorXd filtfilt(const std::vector<Eigen::Matrix<double, 5, 1>>& sos, const Eigen::VectorXd& x);
+Eigen::VectorXd filtfilt(const std::vector<Eigen::Matrix<double, 5, 1>>& sos, const Eigen::VectorXd& x, Eigen::Index reflect = -1);
+
+// Samples until the sections' impulse response stays below 1e-6 of its peak: how far into a
+// log each end's start-up transient of filtfilt reaches (where the log ends while the signal
+// moves), what `spml import --drop-edges` should drop.
+Eigen::Index settling_samples(const std::vector<Eigen::Matrix<double, 5, 1>>& sos);
 
 // Central differences (x[i+1] - x[i-1]) / (2 dt) inside, one-sided at the two ends: the one
 // differentiation of the project (import --derive, generate --derive, the scenarios). Applied
