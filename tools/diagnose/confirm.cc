@@ -1,11 +1,15 @@
 // Stage 6b, confirmation in simulation: a cause whose written form makes the model's open-loop
-// rollouts worse, beyond their noise, is not a gain. Rollouts of the model as given and of the
-// written model start from the same measured states (rollout.h); per joint the paired
-// difference of their end errors over the windows is "worse beyond noise" when its mean exceeds
-// twice its standard error. While some joint is, the kept causes on those joints are taken out
-// of the written model one at a time, the last chosen first; a cause goes (rejected, with both
-// rollout errors in report.json) when the model without it does better on those joints and,
-// over all joints, in rollout error relative to the model as given.
+// rollouts worse is not a gain. Rollouts of the model as given and of the written model start
+// from the same measured states (rollout.h). While some joint's mean end error is larger than
+// the model as given's, the kept causes on those joints are taken out of the written model one
+// at a time, the last chosen first, then all of them together; a cause goes (rejected, with
+// both rollout errors in report.json) when the model without it does better on those joints
+// and, over all joints, in rollout error relative to the model as given. So a real cause,
+// which its own joint's rollouts need, stays. (Only "worse beyond noise", a paired mean beyond
+// two standard errors, started the trials before: an end stop read as re-identified link
+// masses and a spring rolled out 1.6 and 1.5 times worse on two joints of a review's draw,
+// within the 20 windows' noise, and was kept; on a fresh log of that robot it was 3 times
+// worse held out.)
 #include <algorithm>
 #include <cmath>
 
@@ -16,18 +20,9 @@
 namespace spml::diagnose_detail {
 namespace {
 
-std::vector<bool> worse_beyond_noise(const RolloutResult& before, const RolloutResult& after) {
+std::vector<bool> worse_on_mean(const RolloutResult& before, const RolloutResult& after) {
   std::vector<bool> out(before.joints.size(), false);
-  const auto W = before.window_error.size();
-  for (size_t j = 0; j < out.size(); ++j) {
-    double sum = 0, sum2 = 0;
-    for (size_t w = 0; w < W; ++w) {
-      const double d = after.window_error[w][j] - before.window_error[w][j];
-      sum += d, sum2 += d * d;
-    }
-    const double mean = sum / static_cast<double>(W), var = std::max(sum2 / static_cast<double>(W) - mean * mean, 0.0);
-    out[j] = !std::isfinite(mean) || mean > 2 * std::sqrt(var / static_cast<double>(W - 1));
-  }
+  for (size_t j = 0; j < out.size(); ++j) out[j] = !(after.position_error[j] <= before.position_error[j]);
   return out;
 }
 
@@ -88,7 +83,7 @@ void Diagnosis::note_rejections(const MjcfEdits& edits, std::vector<std::string>
   else if (rejected.dump().find("parameters@") != std::string::npos)
     R["parameters_written"] = "partial";
   notes.push_back("rejected in simulation (causes[].rejected): " + rejected.dump() + " made the rollouts of the written model worse "
-                  "beyond their noise on their joints; extended.xml leaves them out, and `final` and extended_check are of the model without them");
+                  "on their joints, and the model without them rolls out better; extended.xml leaves them out, and `final` and extended_check are of the model without them");
 }
 
 // Returns true when a cause (or a joint's part of `parameters`) was rejected; edits and the file
@@ -112,7 +107,7 @@ bool Diagnosis::confirm_in_simulation(const std::string& ext_path, MjcfEdits& ed
       if (!(relative_total(before, without, &worse) < relative_total(before, with, &worse) &&
             relative_total(before, without) < relative_total(before, with)))
         return false;
-      record = {{"reason", "its written form makes the rollouts worse beyond their noise on its joints; extended.xml leaves it out"},
+      record = {{"reason", "its written form makes the rollouts worse on its joints, and the model without it rolls out better; extended.xml leaves it out"},
                 {"rollout_error_with", per_joint_errors(with)}, {"rollout_error_without", per_joint_errors(without)}};
       edits = trial;
       with = std::move(without);
@@ -120,7 +115,7 @@ bool Diagnosis::confirm_in_simulation(const std::string& ext_path, MjcfEdits& ed
     };
     for (bool dropped = true; dropped;) {
       dropped = false;
-      worse = worse_beyond_noise(before, with);
+      worse = worse_on_mean(before, with);
       if (std::find(worse.begin(), worse.end(), true) == worse.end()) break;
       nlohmann::json record;
       for (auto i = static_cast<std::ptrdiff_t>(causes.size()) - 1; i >= 0 && !dropped; --i) {
@@ -144,6 +139,21 @@ bool Diagnosis::confirm_in_simulation(const std::string& ext_path, MjcfEdits& ed
         if (!dropped && (!edits.inertials.empty() || !edits.joint_attributes.empty()) && (dropped = better_without(without_cause(edits, c), record)))
           c["rejected"] = record;
       }
+      if (dropped) continue;
+      // None alone: the causes on the worse joints together. A spring and re-identified link
+      // masses read from an end stop (a review's draw) each held the other up - the rollouts
+      // 7 and 6 times worse without either alone, 5 times better without both - and were kept.
+      MjcfEdits trial = edits;
+      std::vector<nlohmann::json*> together;
+      for (auto& c : causes) {
+        const bool everywhere = c["effect"] == "parameters" && !edits.inertials.empty();
+        if (c.contains("superseded_by") || c.contains("rejected") || !(everywhere || on_joints(c, before.joints, worse))) continue;
+        if (c["effect"] != "parameters" && !c.contains("declaration")) continue;
+        trial = without_cause(trial, c);
+        together.push_back(&c);
+      }
+      if (together.size() > 1 && (dropped = better_without(trial, record)))
+        for (nlohmann::json* c : together) (*c)["rejected"] = record;
     }
   } catch (const std::exception&) {
     // Rollouts impossible (no time stamps, a split shorter than one horizon): run_rollouts says so.
