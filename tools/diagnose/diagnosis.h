@@ -94,6 +94,7 @@ struct Candidate {
   double written_scale = 1;                   // the written model's factor on its levels (refit_written_effects)
   std::vector<bool> at_edge;                  // per shape key: a side of it the plugin refuses at the fit (stateful_errors)
   std::string loose_principal;                // profile_once: the level carrying most of its force, when the profile leaves it loose
+  std::string lost_to_static;                 // the last held-out comparison it lost to the static frictions (note_lost), for not_tried
 };
 
 bool is_stateful(const spml_force_plugin& p);   // #22: advance/reset and no regressor
@@ -323,6 +324,8 @@ class Diagnosis {
   void profile_once(int k, const Fit& current);
   bool shaped(const Candidate& c) const;
   bool beats_static(const Candidate& c, double bar, double rss) const;
+  double stateful_gain(const Candidate& c) const;   // the held-out gain beats_static asks of it
+  void note_lost(int k, double bar, double rss, double gain);
   double static_bar(int joint, const std::vector<int>& order, const std::vector<int>& chosen, const Fit& before, const std::vector<int>& outs,
                     double bar, int except = -1) const;
   BlockColumns key_columns(const Candidate& c, std::vector<size_t>* keys = nullptr, const std::vector<bool>& only = {}) const;

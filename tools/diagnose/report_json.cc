@@ -266,7 +266,14 @@ void Diagnosis::build_report(const std::string& out_dir) {
       still.push_back({{"joint", reg_->joint_names()[j]},
                        {"reason", "does not move in the fit split (|qd| <= " + fmt(opt_.still_speed) + "): its friction and inertia are not identifiable; no cause is tried on it"}});
   R["not_identifiable"] = still;
-  R["not_tried"] = not_tried_;
+  nlohmann::json tried = not_tried_;
+  for (size_t k = 0; k < cands_.size(); ++k) {
+    const Candidate& c = cands_[k];
+    const bool used = std::any_of(causes_.begin(), causes_.end(), [&](const auto& cause) { return cause.candidate == static_cast<int>(k); });
+    if (!c.lost_to_static.empty() && !c.skipped && !used)
+      tried.push_back({{"effect", c.plugin->name}, {"joint", c.joint_name}, {"reason", c.lost_to_static}, {"not_identifiable", c.not_identifiable}});
+  }
+  R["not_tried"] = tried;
   result_.timings.outputs += since(t0);
   // extended_check: the written file against the prediction of the parameters it states.
   const auto written = verify(out_dir, edits, notes, written_ ? written_->prediction_fit : Eigen::VectorXd(fit_.b - final_fit.residual));

@@ -230,7 +230,10 @@ void Diagnosis::forward_backward() {
         const bool replaces = in_place(order[i], chosen).size() <= chosen.size();
         const double bar = static_bar(c.joint, order, chosen, current, outs,
                                       replaces ? rss_on(r_test, outs, test_.N) : std::numeric_limits<double>::infinity());
-        if (std::isfinite(bar) && !gains_on_test(bar, rss, opt_.min_gain, rss_floor(test_.b))) continue;   // beats_static's least bar, before the costly profile
+        if (std::isfinite(bar) && !gains_on_test(bar, rss, opt_.min_gain, rss_floor(test_.b))) {   // beats_static's least bar, before the costly profile
+          note_lost(order[i], bar, rss, opt_.min_gain);
+          continue;
+        }
         profile_once(order[i], current);
         if (!c.loose_principal.empty()) {   // not this effect (profile_once)
           cands_[static_cast<size_t>(order[i])].skipped = true;
@@ -239,7 +242,10 @@ void Diagnosis::forward_backward() {
                                                ") is not determined by the data (profile): not this effect"}});
           continue;
         }
-        if (std::isfinite(bar) && !beats_static(c, bar, rss)) continue;
+        if (std::isfinite(bar) && !beats_static(c, bar, rss)) {
+          note_lost(order[i], bar, rss, stateful_gain(c));
+          continue;
+        }
       }
       accepted = order[i];
       next = std::move(f);
