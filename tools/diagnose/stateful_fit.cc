@@ -438,7 +438,8 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
   auto refuse = [&](const std::string& why) {
     c.skipped = true;
     c.searched = true;
-    not_tried_.push_back({{"effect", c.plugin->name}, {"joint", c.joint_name}, {"reason", "fitted by simulation, but its " + why}});
+    not_tried_.push_back({{"effect", c.plugin->name}, {"joint", c.joint_name}, {"reason", "fitted by simulation, but its " + why},
+                          {"not_identifiable", c.not_identifiable}});
   };
   // A level the data leave free (no influence once the base parameters are refitted: a viscous
   // sigma2 beside the MJCF's damping), or loose (relative error above 50 %) and not needed -
