@@ -545,6 +545,16 @@ TEST(DiagnoseBeyond, ADelayBesideLuGreIsSearchedAgainBesideIt) {
     ASSERT_TRUE(r["delay"]["named"].get<bool>()) << r["delay"].dump();
     EXPECT_NEAR(r["delay"]["seconds"].get<double>(), 5e-3, 0.5e-3);
     EXPECT_EQ(joined(named(r)), "delay stick_slip@j" + std::to_string(d.joint));
+    // Its amplitude is refitted with the written model and folded into the keys written (the
+    // named delay once shifted report.json's causes by one from the effects they describe).
+    for (const auto& c : r["causes"])
+      if (c["effect"] == "stick_slip") {
+        EXPECT_TRUE(c.contains("params_written") && c["params_written"].is_object()) << c.dump();
+        const std::string decl = c.value("declaration", "");
+        const auto at = decl.find(" fc=");
+        ASSERT_NE(at, std::string::npos) << decl;
+        EXPECT_DOUBLE_EQ(std::stod(decl.substr(at + 4)), c["params_written"].value("fc", 0.0)) << c.dump();
+      }
   }
 }
 

@@ -178,7 +178,11 @@ bool is_diagnosed(const std::pair<std::string, std::string>& text) { return text
 // rest fitted again without it. Returns true when a declaration changed.
 bool Diagnosis::refit_written_effects(const std::string& ext_path, MjcfEdits& edits, std::vector<std::string>& notes) {
   nlohmann::json& causes = result_.report["causes"];
-  const size_t first = parameters_named_ ? 1 : 0;
+  // report.json lists `delay` (when named), then `parameters` (when named), then the effects.
+  // (Offset by `parameters` alone, a named delay shifted every effect by one: a LuGre fit beside
+  // a delay was never refitted with the written model, its amplitude 1.0036 not folded into
+  // its keys and params_written missing; a review's draw.)
+  const size_t first = (delay_.named ? 1 : 0) + (parameters_named_ ? 1 : 0);
   bool changed = false;
   // A stateful cause (#22) has one amplitude, its simulated force's, written in its keys where
   // the force scales with them (scales_with_keys, one simulation each: checked once here);
@@ -292,7 +296,7 @@ bool Diagnosis::guard_held_out(const std::string& ext_path, MjcfEdits& edits, st
   if (parameters_named_ && (!edits.joint_attributes.empty() || !edits.inertials.empty())) {
     edits.joint_attributes.clear();
     edits.inertials.clear();
-    R["causes"][0]["rejected"] = record;
+    R["causes"][delay_.named ? 1 : 0]["rejected"] = record;   // `parameters`, after a named `delay`
     R["parameters_written"] = "none";
     notes.push_back(why + ": the re-identified parameters are left out and the effects fitted again with the MJCF's own");
     refit_written_effects(ext_path, edits, notes);
