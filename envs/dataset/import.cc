@@ -404,6 +404,20 @@ Eigen::VectorXd uniform_grid(const Eigen::VectorXd& t, double dt, const std::str
 // The decimation's low-pass: kAntiAliasShare of the Nyquist frequency after keeping every K-th.
 double anti_alias_cutoff(const Conditioning& c, double dt) { return kAntiAliasShare * 0.5 / (dt * c.decimate); }
 
+// The start-up transient a low-pass pass leaves in the rows kept (`drop` cut at each end),
+// relative to their RMS: the pass against the same pass reflected over its whole settling
+// (no transient), on what the dataset will hold - a position's second difference where
+// `second_difference` (--derive amplifies it most).
+double start_up_transient(const std::vector<Eigen::Matrix<double, 5, 1>>& sos, const Eigen::VectorXd& raw, const Eigen::VectorXd& filtered,
+                          Eigen::Index settle, Eigen::Index drop, bool second_difference, double dt) {
+  Eigen::VectorXd a = filtered, b = filtfilt(sos, raw, settle);
+  if (second_difference)
+    for (auto* v : {&a, &b}) *v = central_difference(central_difference(*v, dt), dt);
+  const Eigen::Index len = raw.size() - 2 * drop;
+  const double rms = std::sqrt(b.segment(drop, len).squaredNorm() / static_cast<double>(len));
+  return (a - b).segment(drop, len).cwiseAbs().maxCoeff() / std::max(rms, 1e-300);
+}
+
 // Steps 1-6 of Conditioning on the chosen columns (in place), with the time column. Returns
 // the anti-alias cut-off applied (0: none).
 double condition(const Conditioning& c, const std::string& source, Eigen::VectorXd& t, std::vector<Eigen::VectorXd>& xs,
@@ -434,24 +448,14 @@ double condition(const Conditioning& c, const std::string& source, Eigen::Vector
     for (auto* cols : {&xs, &ys})
       for (size_t k = 0; k < cols->size(); ++k) {
         Eigen::VectorXd& col = (*cols)[k];
-        const Eigen::VectorXd filtered = filtfilt(sos, col);
-        // The start-up transient left in the rows kept: against the pass reflected over the
-        // whole settling (no transient), on what the dataset will hold (a position's second
-        // difference: --derive amplifies it most).
-        const Eigen::Index n = col.size(), drop = c.drop_edges;
-        if (settle > drop && 2 * drop + 2 < n) {
-          Eigen::VectorXd a = filtered, b = filtfilt(sos, col, settle);
-          std::string what = cols == &xs ? xn[k] : "target " + std::to_string(k + 1);
-          if (cols == &xs && c.derive && xn[k].rfind("q:", 0) == 0) {
-            for (auto* v : {&a, &b}) *v = central_difference(central_difference(*v, dt), dt);
-            what = "the second difference of " + what;
-          }
-          const Eigen::Index len = n - 2 * drop;
-          const double rms = std::sqrt(b.segment(drop, len).squaredNorm() / static_cast<double>(len));
-          const double off = (a - b).segment(drop, len).cwiseAbs().maxCoeff() / std::max(rms, 1e-300);
-          if (off > transient) transient = off, transient_column = what;
+        Eigen::VectorXd filtered = filtfilt(sos, col);
+        if (settle > c.drop_edges && 2 * c.drop_edges + 2 < col.size()) {
+          const bool position = cols == &xs && c.derive && xn[k].rfind("q:", 0) == 0;
+          const double off = start_up_transient(sos, col, filtered, settle, c.drop_edges, position, dt);
+          if (off > transient)
+            transient = off, transient_column = position ? "the second difference of " + xn[k] : cols == &xs ? xn[k] : "target " + std::to_string(k + 1);
         }
-        col = filtered;
+        col = std::move(filtered);
       }
   }
   if (c.derive) {

@@ -20,12 +20,6 @@
 namespace spml::diagnose_detail {
 namespace {
 
-std::vector<bool> worse_on_mean(const RolloutResult& before, const RolloutResult& after) {
-  std::vector<bool> out(before.joints.size(), false);
-  for (size_t j = 0; j < out.size(); ++j) out[j] = !(after.position_error[j] <= before.position_error[j]);
-  return out;
-}
-
 // Sum over joints of the rollout error relative to the model as given's.
 double relative_total(const RolloutResult& before, const RolloutResult& after, const std::vector<bool>* only = nullptr) {
   double s = 0;
@@ -113,18 +107,22 @@ bool Diagnosis::confirm_in_simulation(const std::string& ext_path, MjcfEdits& ed
       with = std::move(without);
       return rejected_any = true;
     };
+    // A kept cause on a worse joint. `parameters` lists the joints of its contradicted base
+    // parameters, but the inertials it writes act on every joint (a hidden Coulomb level on a
+    // slide made 27x worse rollouts on the hinge before it, with `parameters` listing the slide
+    // only, and nothing rejected).
+    auto on_worse = [&](const nlohmann::json& c) {
+      const bool everywhere = c["effect"] == "parameters" && !edits.inertials.empty();
+      return !c.contains("superseded_by") && !c.contains("rejected") && (everywhere || on_joints(c, before.joints, worse));
+    };
     for (bool dropped = true; dropped;) {
       dropped = false;
-      worse = worse_on_mean(before, with);
+      worse = worse_joints(before, with);
       if (std::find(worse.begin(), worse.end(), true) == worse.end()) break;
       nlohmann::json record;
       for (auto i = static_cast<std::ptrdiff_t>(causes.size()) - 1; i >= 0 && !dropped; --i) {
         nlohmann::json& c = causes[static_cast<size_t>(i)];
-        // `parameters` lists the joints of its contradicted base parameters, but the inertials it
-        // writes act on every joint (a hidden Coulomb level on a slide made 27x worse rollouts on
-        // the hinge before it, with `parameters` listing the slide only, and nothing rejected).
-        const bool everywhere = c["effect"] == "parameters" && !edits.inertials.empty();
-        if (c.contains("superseded_by") || c.contains("rejected") || !(everywhere || on_joints(c, before.joints, worse))) continue;
+        if (!on_worse(c)) continue;
         if (c["effect"] != "parameters") {
           if (c.contains("declaration") && (dropped = better_without(without_cause(edits, c), record))) c["rejected"] = record;
           continue;
@@ -146,9 +144,7 @@ bool Diagnosis::confirm_in_simulation(const std::string& ext_path, MjcfEdits& ed
       MjcfEdits trial = edits;
       std::vector<nlohmann::json*> together;
       for (auto& c : causes) {
-        const bool everywhere = c["effect"] == "parameters" && !edits.inertials.empty();
-        if (c.contains("superseded_by") || c.contains("rejected") || !(everywhere || on_joints(c, before.joints, worse))) continue;
-        if (c["effect"] != "parameters" && !c.contains("declaration")) continue;
+        if (!on_worse(c) || (c["effect"] != "parameters" && !c.contains("declaration"))) continue;
         trial = without_cause(trial, c);
         together.push_back(&c);
       }

@@ -21,6 +21,7 @@
 
 #include <Eigen/Core>
 #include <chrono>
+#include <cmath>
 #include <deque>
 #include <map>
 #include <sstream>
@@ -48,6 +49,9 @@ inline double since(Clock::time_point t0) { return std::chrono::duration<double>
 
 std::string fmt(double v, int precision = 4);
 std::string integer_text(double v);
+
+// Root mean square of a stacked vector (0 when empty).
+inline double rms(const Eigen::VectorXd& v) { return v.size() ? std::sqrt(v.squaredNorm() / static_cast<double>(v.size())) : 0.0; }
 
 // A model as given (or one of its declared forces) predicting torques this many times the
 // measured ones' RMS is refused: a value off by orders of magnitude leaves nothing to diagnose,

@@ -196,7 +196,7 @@ void Diagnosis::add_declared_forces(const SplitData& s, Eigen::VectorXd& into) c
     // A declaration the plugin accepts can still overflow along a log (LuGre with sigma1 = 1e300:
     // a force of 1e299, whose squares are inf and every score after them NaN; a review's draw
     // crashed on it).
-    const double rms_torque = std::sqrt(s.b.squaredNorm() / static_cast<double>(std::max<Eigen::Index>(s.b.size(), 1)));
+    const double rms_torque = rms(s.b);
     const double peak = f.size() ? f.cwiseAbs().maxCoeff() : 0.0;
     const std::string what = opt_.model + ": " + in.decl.element + " (" + in.decl.type + "): its force along split '" + s.name + "' of " + opt_.data;
     if (!(peak <= kAbsurdTorqueRatio * rms_torque))

@@ -41,7 +41,7 @@ SplitData Diagnosis::prepare(const Split& s, const std::vector<Eigen::Index>& ru
   add_declared_forces(d, d.friction);
   d.given = d.base.times(base_.model_values);
   if (d.friction.size()) d.given += d.friction;
-  const double rms_torque = std::sqrt(d.b.squaredNorm() / static_cast<double>(std::max<Eigen::Index>(d.b.size(), 1)));
+  const double rms_torque = rms(d.b);
   for (Eigen::Index i = 0; i < d.given.size(); ++i)
     if (!(std::fabs(d.given[i]) <= kAbsurdTorqueRatio * rms_torque))
       throw DatasetError(opt_.model + ": the model as given predicts " + fmt(d.given[i]) + " on split '" + s.name + "' of " + opt_.data +

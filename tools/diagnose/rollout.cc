@@ -132,6 +132,12 @@ RolloutResult rollout(const std::string& mjcf_path, const Split& s, int windows,
   return out;
 }
 
+std::vector<bool> worse_joints(const RolloutResult& before, const RolloutResult& after) {
+  std::vector<bool> out(before.joints.size(), false);
+  for (size_t j = 0; j < out.size(); ++j) out[j] = !(after.position_error[j] <= before.position_error[j]);
+  return out;
+}
+
 std::vector<RolloutTrace> rollout_traces(const std::string& mjcf_path, const Split& s, int windows, double horizon,
                                          const std::vector<Eigen::Index>& runs, const std::vector<int>& which) {
   Windows sim(mjcf_path, s, horizon, runs);

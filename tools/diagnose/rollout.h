@@ -39,6 +39,11 @@ RolloutResult rollout(const std::string& mjcf_path, const Split& s, int windows,
 std::vector<RolloutTrace> rollout_traces(const std::string& mjcf_path, const Split& s, int windows, double horizon,
                                          const std::vector<Eigen::Index>& runs, const std::vector<int>& which);
 
+// Per joint: does `after` end farther from the measured positions than `before`, on mean over
+// the windows (or not finite)? The joints report.json lists in rollout.worse_on, and those the
+// confirmation in simulation tries to mend (confirm.cc).
+std::vector<bool> worse_joints(const RolloutResult& before, const RolloutResult& after);
+
 // Up to three windows worth drawing: the one with the largest end error (each joint's error
 // relative to its mean over the windows: joints differ in units), the median one and the smallest.
 std::vector<int> windows_to_trace(const RolloutResult& r);

@@ -108,7 +108,7 @@ std::pair<Eigen::VectorXd, Eigen::VectorXd> Diagnosis::verify(const std::string&
   }
   R["extended_mjcf"] = out_dir.empty() ? "" : "extended.xml";
   R["extended_check"] = {{"max_abs_deviation", (written.first - final_pred_fit).cwiseAbs().maxCoeff()},
-                         {"rms_torque", std::sqrt(fit_.b.squaredNorm() / static_cast<double>(fit_.b.size()))}};
+                         {"rms_torque", rms(fit_.b)}};
   R["final"] = metrics(fit_.b - written.first, test_.b - written.second);
   R["needs_spml_plugins"] = report_written_form(edits, notes);   // what stays a plugin text (written_form.cc)
   result_.timings.outputs += since(t0);
@@ -150,10 +150,11 @@ void Diagnosis::run_rollouts(const std::string& ext_path, const std::string& out
     const RolloutResult before = rollout(opt_.model, test_.split, opt_.rollouts, opt_.rollout_seconds, test_.runs);
     const RolloutResult after = rollout(ext_path, test_.split, opt_.rollouts, opt_.rollout_seconds, test_.runs);
     nlohmann::json b = nlohmann::json::object(), a = nlohmann::json::object(), worse = nlohmann::json::array();
+    const std::vector<bool> worse_on = worse_joints(before, after);
     for (size_t j = 0; j < before.joints.size(); ++j) {
       b[before.joints[j]] = before.position_error[j];
       a[after.joints[j]] = after.position_error[j];
-      if (!(after.position_error[j] <= before.position_error[j])) worse.push_back(before.joints[j]);
+      if (worse_on[j]) worse.push_back(before.joints[j]);
     }
     const nlohmann::json rejected = rejected_causes(R["causes"]);
     const std::vector<int> traced = windows_to_trace(before);
