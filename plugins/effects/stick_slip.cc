@@ -43,7 +43,10 @@ struct StickSlip {
   const double* p(size_t i) const { return &theta[6 * i]; }   // fc fs vs sigma0 sigma1 sigma2
   double g(size_t i, double v) const {
     const double* q = p(i);
-    return q[0] + (q[1] - q[0]) * std::exp(-(v / q[2]) * (v / q[2]));
+    // Far beyond vs the hump is exactly 0 in double precision (exp(-746) underflows to 0):
+    // no exp there, the same force (diagnose integrates this along whole logs thousands of times).
+    const double a = (v / q[2]) * (v / q[2]);
+    return a > 746 ? q[0] : q[0] + (q[1] - q[0]) * std::exp(-a);
   }
   std::string config() const {
     static const char* keys[] = {"fc", "fs", "vs", "sigma0", "sigma1", "sigma2"};

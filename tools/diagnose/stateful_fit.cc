@@ -32,8 +32,7 @@ namespace spml::diagnose_detail {
 namespace {
 
 constexpr double kNotIdentifiable = 0.5;   // relative standard error above which a key is reported not identifiable
-constexpr int kPolishEvalsPerKey = 300;    // subplex evaluations per fitted key (polish_stateful) ...
-constexpr double kPolishRows = 8000;       // ... up to this many rows per joint in the fit split
+constexpr int kPolishEvalsPerKey = 300;    // subplex evaluations per fitted key (polish_stateful), whatever the log's length
 constexpr int kProfileCells = 5;           // profile_stateful: points per shape key (cell centres of its log range) ...
 constexpr int kProfileEvalsPerKey = 100;   // ... each polished this long over the other keys
 constexpr double kProfileChi2 = 3.84;      // a profile point the data do not reject: chi-square(1) at 95 %
@@ -351,9 +350,10 @@ void Diagnosis::polish_stateful(const Candidate& c, const Fit& current, const st
   // 80 evaluations per key stopped LuGre's first pass short of the optimum: fs 1.31 where it
   // lies at 1.07 (truth 1.04), 26 % apart for a change of the data's anti-alias filter far above
   // their band; 300 per key (1800 per pass on LuGre's 6 keys) reach it from both datasets.
-  // Scaled down beyond kPolishRows rows (a longer log's objective is smoother, each evaluation dearer).
-  const double rows = static_cast<double>(fit_.N);
-  local.set_maxeval(std::max(1, static_cast<int>(evals_per_key * std::min(1.0, kPolishRows / rows))) * static_cast<int>(y.size()));
+  // Not scaled down for long logs: cut in proportion beyond 8000 rows (an undecimated LuGre log
+  // at 1 kHz, 20 800 rows: 115 per key), the polish stopped at fs = fc, the fit was refused and
+  // `coulomb` and `parameters` were named (DiagnoseBeyond.ALuGreLogKeptAtOneKilohertzIsFittedAsDecimated).
+  local.set_maxeval(evals_per_key * static_cast<int>(y.size()));
   local.set_xtol_abs(1e-4);
   double value = 0;
   try {
