@@ -266,6 +266,8 @@ class Diagnosis {
   void eliminate_backward(bool base_free = true);
   void decide_parameters();
   Fit iv_refit(const std::vector<int>& causes);
+  Eigen::VectorXd away_from_reversals(double* half_width_s = nullptr) const;
+  Fit iv_refit_masked(const std::vector<int>& causes, const Eigen::VectorXd& mask);
   std::vector<int> kept_effects() const;
   // report_json.cc
   nlohmann::json metrics(const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test) const;
@@ -371,6 +373,8 @@ class Diagnosis {
   bool parameters_named_ = false;
   double parameters_delta_bic_ = 0, parameters_n_eff_ = 0;
   int parameters_contradicted_ = 0;
+  int parameters_contradicted_away_ = -1;   // ... of them, by the rows away from velocity reversals (-1: not checked)
+  std::vector<bool> parameters_away_;       // per base parameter: contradicted there too (empty: not checked)
   Eigen::VectorXd written_weights_;     // decide_parameters: each output's row weight in the written fit (design.h: output_weights)
   double parameters_z_ = 3;             // the standard errors beyond which a base parameter contradicts the MJCF (decide_parameters)
   Fit parameters_fit_;                  // the free fit whose estimates decide `parameters` (ls or iv)

@@ -32,6 +32,60 @@ Eigen::VectorXd Diagnosis::residual_on(const SplitData& s, const std::vector<int
   return s.y0 - pred;
 }
 
+// A stacked 0/1 mask of the fit split's rows: 0 on each output's rows within half a period of
+// the data's low-pass (at least two samples) of a velocity reversal of its joint.
+Eigen::VectorXd Diagnosis::away_from_reversals(double* half_width_s) const {
+  const Eigen::Index N = fit_.N;
+  const auto O = static_cast<Eigen::Index>(out_joint_index_.size());
+  Eigen::VectorXd mask = Eigen::VectorXd::Ones(N * O);
+  if (fit_.split.t.size() != N || N < 3) return Eigen::VectorXd();
+  const double dt = (fit_.split.t[N - 1] - fit_.split.t[0]) / static_cast<double>(N - 1);
+  const double cutoff = filter_plan_.source == FilterPlan::Source::none ? 0.0 : filter_plan_.lowpass.cutoff_hz;
+  const double half = std::max(2 * dt, cutoff > 0 ? 0.5 / cutoff : 0.0);
+  if (half_width_s) *half_width_s = half;
+  const auto w = static_cast<Eigen::Index>(std::ceil(half / dt));
+  for (Eigen::Index o = 0; o < O; ++o) {
+    const auto col = fit_.cols->qd[static_cast<size_t>(out_joint_index_[static_cast<size_t>(o)])];
+    for (Eigen::Index i = 1; i < N; ++i) {
+      const double a = fit_.split.X(i - 1, col), b = fit_.split.X(i, col);
+      if (!((a > 0 && b <= 0) || (a < 0 && b >= 0))) continue;
+      const Eigen::Index from = std::max<Eigen::Index>(0, i - w), to = std::min<Eigen::Index>(N - 1, i + w);
+      mask.segment(o * N + from, to - from + 1).setZero();
+    }
+  }
+  return mask;
+}
+
+namespace {
+
+BlockColumns masked(const BlockColumns& b, const Eigen::VectorXd& mask) {
+  BlockColumns out = b;
+  for (size_t a = 0; a < out.active.size(); ++a)
+    out.parts[a].array().colwise() *= mask.segment(out.active[a] * out.rows_per_output, out.rows_per_output).array();
+  return out;
+}
+
+}  // namespace
+
+// iv_refit on the rows where mask is 1 (the others zeroed in the target, the columns and the
+// instruments: equations that say nothing).
+Fit Diagnosis::iv_refit_masked(const std::vector<int>& causes, const Eigen::VectorXd& mask) {
+  iv_refit(causes);   // the instruments, simulated once
+  std::vector<BlockColumns> cols, zs;
+  cols.reserve(causes.size() + 1);
+  zs.reserve(causes.size() + 1);
+  cols.push_back(masked(fit_.base, mask));
+  for (int c : causes) cols.push_back(masked(cands_[static_cast<size_t>(c)].fit_cols, mask));
+  std::vector<const BlockColumns*> F, Z;
+  for (const auto& c : cols) F.push_back(&c);
+  const Eigen::VectorXd y = fit_.y0.cwiseProduct(mask);
+  if (!twin_) return fit_blocks(F, y, false, fit_.N);
+  zs.push_back(masked(twin_->base, mask));
+  for (int c : causes) zs.push_back(masked(columns_of(cands_[static_cast<size_t>(c)], *twin_), mask));
+  for (const auto& z : zs) Z.push_back(&z);
+  return iv_fit_blocks(F, Z, y, fit_.N);
+}
+
 double Diagnosis::rss_on(const Eigen::VectorXd& r, const std::vector<int>& outputs, Eigen::Index N) const {
   double s = 0;
   for (int o : outputs) s += r.segment(o * N, N).squaredNorm();

@@ -86,8 +86,10 @@ nlohmann::json Diagnosis::parameters_cause(MjcfEdits& edits, std::vector<std::st
       undetermined.push_back(name);
       continue;
     }
-    // Contradicted: the estimate lies beyond parameters_z_ standard errors of the MJCF's value.
+    // Contradicted: the estimate lies beyond parameters_z_ standard errors of the MJCF's value,
+    // on every row and on the rows away from velocity reversals (decide_parameters).
     if (std::fabs(d) <= parameters_z_ * e) continue;
+    if (!parameters_away_.empty() && !parameters_away_[static_cast<size_t>(i)]) continue;
     params[name] = base_.model_values[i] + d;
     se[name] = e;
     prior[name] = base_.model_values[i];
@@ -236,6 +238,7 @@ void Diagnosis::build_report(const std::string& out_dir) {
   R["statistics"] = {{"standard_errors", "autocorrelation-robust (batch means, Andrews bandwidth)"},
                      {"equations", fit_.y0.size()}, {"parameters_n_eff", parameters_n_eff_},
                      {"parameters_delta_bic", parameters_delta_bic_}, {"parameters_contradicted", parameters_contradicted_},
+                     {"parameters_contradicted_away_from_reversals", parameters_contradicted_away_},
                      {"parameters_z", parameters_z_},
                      {"estimator", {{"parameters", parameters_estimator_.empty() ? "ls" : parameters_estimator_}, {"effects", "ls"}}}};
   if (!instruments_.is_null()) R["statistics"]["estimator"]["instruments"] = instruments_;

@@ -438,8 +438,14 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
   auto refuse = [&](const std::string& why) {
     c.skipped = true;
     c.searched = true;
+    // What the fit found, so that a reader can see which end a key ran to, or how loose a level is.
+    nlohmann::json params, se;
+    for (size_t k = 0; k < ns; ++k) {
+      params[c.shape[k]->key] = c.shape_values[k];
+      se[c.shape[k]->key] = k < c.stateful_se.size() ? c.stateful_se[k] : std::numeric_limits<double>::infinity();
+    }
     not_tried_.push_back({{"effect", c.plugin->name}, {"joint", c.joint_name}, {"reason", "fitted by simulation, but its " + why},
-                          {"not_identifiable", c.not_identifiable}});
+                          {"not_identifiable", c.not_identifiable}, {"params", params}, {"stderr", se}});
   };
   // A level the data leave free (no influence once the base parameters are refitted: a viscous
   // sigma2 beside the MJCF's damping), or loose (relative error above 50 %) and not needed -
