@@ -3,6 +3,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <gtest/gtest.h>
 
 #include <fstream>
 #include <random>
@@ -40,7 +41,11 @@ inline std::vector<double> torque_scale(const std::string& path, int J) {
 
 }  // namespace spml::test
 
+#include <filesystem>
+#include <iostream>
+
 #include "spml/dataset.h"
+#include "spml/diagnose.h"
 
 namespace spml::test {
 
@@ -83,6 +88,26 @@ inline Dataset exact_dataset(const std::string& model_path, const std::vector<st
   const int k = N * 7 / 10;
   ds.splits = {all.slice(0, k, "train"), all.slice(k, N, "test")};
   return ds;
+}
+
+// A log of the model `truth` made as a user makes one (spml generate with the options
+// `generate`, spml import with the options `import`), diagnosed on the model `given` in `dir`,
+// `rollouts` of the confirmation in simulation (0: none). Prints the summary; returns report.json.
+inline nlohmann::json diagnose_generated(const std::filesystem::path& dir, const std::string& given, const std::string& truth,
+                                        const std::string& generate, const std::string& import, int rollouts = 0) {
+  const std::string user = (dir / "user.xml").string(), true_model = (dir / "true.xml").string();
+  std::ofstream(user) << given;
+  std::ofstream(true_model) << truth;
+  const std::string csv = (dir / "log.csv").string(), h5 = (dir / "log.h5").string(), bin = spml_bin();
+  EXPECT_EQ(run(bin + " generate --model '" + true_model + "' " + generate + " -q -o '" + csv + "' 2>&1").exit_code, 0);
+  EXPECT_EQ(run(bin + " import '" + csv + "' " + import + " --out '" + h5 + "' 2>&1").exit_code, 0);
+  DiagnoseOptions o;
+  o.model = user;
+  o.data = h5;
+  o.rollouts = rollouts;
+  DiagnoseResult r = diagnose(o, "");
+  std::cout << r.summary;
+  return std::move(r.report);
 }
 
 }  // namespace spml::test

@@ -767,22 +767,11 @@ nlohmann::json diagnose_arm2_lugre(const std::filesystem::path& dir, int seed, i
   </worldbody>
 </mujoco>
 )";
-  const std::string tag = std::to_string(seed) + "_" + std::to_string(decimate);
-  const std::string model = (dir / "arm2.xml").string(), truth = (dir / "true.xml").string();
-  std::ofstream(model) << arm;
-  std::ofstream(truth) << test::with_declarations(arm, {"type=stick_slip joints=el fc=0.3 fs=0.5 vs=0.05 sigma0=150 sigma1=1.5 sigma2=0"});
-  const std::string log = (dir / ("log" + tag + ".csv")).string(), data = (dir / ("log" + tag + ".h5")).string(),
-                    out = (dir / ("d" + tag)).string();
-  auto g = test::run(test::spml_bin() + " generate --model '" + truth + "' --seed " + std::to_string(seed) +
-                     " --duration 31 --torque-noise 0.01 --encoder-bits 18 --out '" + log + "'");
-  EXPECT_EQ(g.exit_code, 0) << g.output;
-  g = test::run(test::spml_bin() + " import '" + log + "' --t t --x q:sh,q:el --y tau:sh,tau:el --lowpass 10 --derive --drop-edges 612" +
-                (decimate > 1 ? " --decimate " + std::to_string(decimate) : std::string()) + " --out '" + data + "'");
-  EXPECT_EQ(g.exit_code, 0) << g.output;
-  g = test::run(test::spml_bin() + " diagnose --model '" + model + "' --data '" + data + "' --no-plots --out '" + out + "'");
-  EXPECT_EQ(g.exit_code, 0) << g.output;
-  std::cout << g.output;
-  return nlohmann::json::parse(test::read_file(out + "/report.json"));
+  return test::diagnose_generated(dir, arm, test::with_declarations(arm, {"type=stick_slip joints=el fc=0.3 fs=0.5 vs=0.05 sigma0=150 sigma1=1.5 sigma2=0"}),
+                                 "--seed " + std::to_string(seed) + " --duration 31 --torque-noise 0.01 --encoder-bits 18",
+                                 "--t t --x q:sh,q:el --y tau:sh,tau:el --lowpass 10 --derive --drop-edges 612" +
+                                     (decimate > 1 ? " --decimate " + std::to_string(decimate) : std::string()),
+                                 20);
 }
 
 // `stick_slip` alone on the elbow, fc within 20 %, fs within 20 % or reported not identifiable.
@@ -832,19 +821,9 @@ nlohmann::json diagnose_rev3_coulomb(const std::filesystem::path& dir, const std
 )";
   std::string truth = test::with_declarations(given, {"type=coulomb joints=shoulder fc=0.6"});
   truth.replace(truth.find("damping=\"0.25\""), 15, "damping=\"" + true_damping + "\"");
-  const std::string model = (dir / "given.xml").string(), true_model = (dir / "true.xml").string(), log = (dir / "log.csv").string(),
-                    data = (dir / "log.h5").string(), out = (dir / "d").string();
-  std::ofstream(model) << given;
-  std::ofstream(true_model) << truth;
-  auto g = test::run(test::spml_bin() + " generate --model '" + true_model + "' --seed 51 --duration 31 --torque-noise 0.01 --encoder-bits 18 --out '" + log + "'");
-  EXPECT_EQ(g.exit_code, 0) << g.output;
-  g = test::run(test::spml_bin() + " import '" + log + "' --t t --x q:yaw,q:shoulder,q:ext --y tau:yaw,tau:shoulder,tau:ext --lowpass 10 --derive" +
-                " --drop-edges 612 --decimate 5 --out '" + data + "'");
-  EXPECT_EQ(g.exit_code, 0) << g.output;
-  g = test::run(test::spml_bin() + " diagnose --model '" + model + "' --data '" + data + "' --no-plots --out '" + out + "'");
-  EXPECT_EQ(g.exit_code, 0) << g.output;
-  std::cout << g.output;
-  return nlohmann::json::parse(test::read_file(out + "/report.json"));
+  return test::diagnose_generated(dir, given, truth, "--seed 51 --duration 31 --torque-noise 0.01 --encoder-bits 18",
+                                 "--t t --x q:yaw,q:shoulder,q:ext --y tau:yaw,tau:shoulder,tau:ext --lowpass 10 --derive --drop-edges 612 --decimate 5",
+                                 20);
 }
 
 // Through the import's low-pass, a Coulomb friction's switch at each reversal, and its stick

@@ -636,19 +636,9 @@ TEST(DiagnoseCases, TheFileLeftInOutIsTheModelScored) {
 // as a user would; diagnosed against the user's model (no rollouts).
 nlohmann::json diagnose_user_log(const fs::path& dir, const std::string& mjcf, const std::string& hidden, const std::string& generate,
                                  const std::string& import) {
-  const std::string user = (dir / "user.xml").string(), truth = (dir / "true.xml").string();
-  std::ofstream(user) << mjcf;
   std::string with = mjcf;
   with.replace(with.find("  <worldbody>"), 0, "  <custom><text name=\"spml.plugin.x\" data=\"" + hidden + "\"/></custom>\n");
-  std::ofstream(truth) << with;
-  const std::string csv = (dir / "log.csv").string(), h5 = (dir / "log.h5").string(), bin = test::spml_bin();
-  EXPECT_EQ(test::run(bin + " generate --model '" + truth + "' " + generate + " -q -o '" + csv + "' 2>&1").exit_code, 0);
-  EXPECT_EQ(test::run(bin + " import '" + csv + "' " + import + " --out '" + h5 + "' 2>&1").exit_code, 0);
-  DiagnoseOptions o;
-  o.model = user;
-  o.data = h5;
-  o.rollouts = 0;
-  return diagnose(o, "").report;
+  return test::diagnose_generated(dir, mjcf, with, generate, import);
 }
 
 // A reviewer's hinge + slide arm with a Coulomb level (0.35 N) hidden on the slide, measured
