@@ -453,12 +453,21 @@ void Diagnosis::decide_parameters() {
                                                    std::fabs(parameters_fit_.coef[i]) > parameters_z_ * parameters_fit_.stderr_[i] &&
                                                    std::fabs(m.coef[i]) > parameters_z_ * m.stderr_[i] * grown[i] && m.coef[i] * parameters_fit_.coef[i] > 0;
       parameters_contradicted_away_ = static_cast<int>(std::count(parameters_away_.begin(), parameters_away_.end(), true));
+      const std::string where = " with the rows near velocity reversals (within " + fmt(1e3 * half_width, 3) + " ms of one, " +
+                                fmt(100 * (1 - away.mean()), 2) + " % of the rows), where a friction's switch through the data's low-pass is least exact";
       if (parameters_contradicted_away_ == 0) {
         parameters_named_ = false;
-        notes_.push_back("the MJCF's base parameters are contradicted only with the rows near velocity reversals (within " +
-                         fmt(1e3 * half_width, 3) + " ms of one, " + fmt(100 * (1 - away.mean()), 2) +
-                         " % of the rows), where a friction's switch through the data's low-pass is least exact; on the others none lies beyond " +
+        notes_.push_back("the MJCF's base parameters are contradicted only" + where + "; on the others none lies beyond " +
                          fmt(parameters_z_, 3) + " standard errors: `parameters` is not named");
+      } else {
+        // Said, so that a reader sees what the listing leaves out (extended.xml states the whole fit).
+        std::string only;
+        for (int i = 0; i < base_.rank; ++i)
+          if (!parameters_away_[static_cast<size_t>(i)] && parameters_fit_.determined[static_cast<size_t>(i)] &&
+              std::fabs(parameters_fit_.coef[i]) > parameters_z_ * parameters_fit_.stderr_[i])
+            only += (only.empty() ? "" : ", ") + base_.names[static_cast<size_t>(i)];
+        if (!only.empty())
+          notes_.push_back("`parameters` does not list " + only + ": contradicted only" + where + " (extended.xml states the whole fit)");
       }
     }
   }
