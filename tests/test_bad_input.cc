@@ -228,6 +228,23 @@ TEST(Hardening, ImportSaysHowManyEdgeSamplesTheFiltersSpoil) {
   EXPECT_EQ(enough.output.find("warning"), std::string::npos) << enough.output;
 }
 
+// A low-passed log kept far above its band: the import says which decimation keeps the band
+// (diagnose's fits by simulation cost in proportion to the rows); decimated, nothing is said.
+TEST(Hardening, ImportSuggestsTheDecimationThatKeepsTheBand) {
+  {
+    std::ofstream log(f("fast.csv"));
+    log << "t,q:j,tau:j\n";
+    for (int i = 0; i < 3000; ++i) log << i * 1e-3 << "," << std::sin(2.0 * i * 1e-3) << "," << std::cos(2.0 * i * 1e-3) << "\n";
+  }
+  const std::string import = spml("import " + f("fast.csv") + " --t t --x q:j --y tau:j --lowpass 20 --derive --drop-edges 307 -o " + f("fast.h5"));
+  const auto kept = run(import);
+  EXPECT_EQ(kept.exit_code, 0) << kept.output;
+  EXPECT_NE(kept.output.find("fast.csv: the 20 Hz band is sampled at 1000 Hz; --decimate 5 keeps it (200 Hz)"), std::string::npos) << kept.output;
+  const auto decimated = run(import + " --decimate 5");
+  EXPECT_EQ(decimated.exit_code, 0) << decimated.output;
+  EXPECT_EQ(decimated.output.find("note:"), std::string::npos) << decimated.output;
+}
+
 // Output that never reached its file is a failure: a --json document into a full device.
 TEST(Hardening, StandardOutputThatCannotBeWrittenIsAnError) {
   if (!fs::exists("/dev/full")) GTEST_SKIP() << "no /dev/full on this machine";
