@@ -494,7 +494,7 @@ double condition(const Conditioning& c, const std::string& source, Eigen::Vector
               << " samples (" << static_cast<double>(settle) * dt << " s) into each end of the log: drop at least " << settle << "\n";
   // A band far below the sampling rate keeps all it holds at a fraction of the rows, and
   // diagnose's fits by simulation integrate every row thousands of times (a review's 31 s
-  // LuGre log with 3 joints kept at 1 kHz: 115 s, decimated to 200 Hz 13 s, the same answer).
+  // LuGre log with 3 joints kept at 1 kHz: 54 s, decimated to 200 Hz 12 s, the same causes).
   if (c.lowpass_hz > 0 && c.decimate == 1) {
     const double rate = 1.0 / dt;
     const int k = static_cast<int>(std::floor(rate / std::max(200.0, 10 * c.lowpass_hz) + 1e-6));   // 1 / median step: 999.99... at 1 kHz
