@@ -416,10 +416,12 @@ void Diagnosis::decide_parameters() {
   // of 3.1-3.9 standard errors, where damping errors of 10-40 % stand 7.6-2400 off.
   const int tests = static_cast<int>(std::count(parameters_fit_.determined.begin(), parameters_fit_.determined.begin() + base_.rank, true));
   parameters_z_ = familywise_z(std::erfc(3 / std::sqrt(2.0)), tests);
+  // Base parameter i of fit f lies beyond the bar (its standard error grown by `grow`).
+  auto contradicts = [&](const Fit& f, int i, double grow) {
+    return f.determined[static_cast<size_t>(i)] && std::fabs(f.coef[i]) > parameters_z_ * f.stderr_[i] * grow;
+  };
   parameters_contradicted_ = 0;
-  for (int i = 0; i < base_.rank; ++i)
-    parameters_contradicted_ += parameters_fit_.determined[static_cast<size_t>(i)] &&
-                                std::fabs(parameters_fit_.coef[i]) > parameters_z_ * parameters_fit_.stderr_[i];
+  for (int i = 0; i < base_.rank; ++i) parameters_contradicted_ += contradicts(parameters_fit_, i, 1);
   // The held-out gain under either noise model: one variance for every joint (the residual sum
   // of squares in N m^2) or one per joint (the geometric mean of each joint's sum relative to
   // its own as given). The base parameters act on every joint: a contradiction on a small joint
@@ -449,9 +451,7 @@ void Diagnosis::decide_parameters() {
       const Fit m = iv_refit_masked(effects, away);
       parameters_away_.assign(static_cast<size_t>(base_.rank), false);
       for (int i = 0; i < base_.rank; ++i)
-        parameters_away_[static_cast<size_t>(i)] = parameters_fit_.determined[static_cast<size_t>(i)] && m.determined[static_cast<size_t>(i)] &&
-                                                   std::fabs(parameters_fit_.coef[i]) > parameters_z_ * parameters_fit_.stderr_[i] &&
-                                                   std::fabs(m.coef[i]) > parameters_z_ * m.stderr_[i] * grown[i] && m.coef[i] * parameters_fit_.coef[i] > 0;
+        parameters_away_[static_cast<size_t>(i)] = contradicts(parameters_fit_, i, 1) && contradicts(m, i, grown[i]) && m.coef[i] * parameters_fit_.coef[i] > 0;
       parameters_contradicted_away_ = static_cast<int>(std::count(parameters_away_.begin(), parameters_away_.end(), true));
       const std::string where = " with the rows near velocity reversals (within " + fmt(1e3 * half_width, 3) + " ms of one, " +
                                 fmt(100 * (1 - away.mean()), 2) + " % of the rows), where a friction's switch through the data's low-pass is least exact";
@@ -463,8 +463,7 @@ void Diagnosis::decide_parameters() {
         // Said, so that a reader sees what the listing leaves out (extended.xml states the whole fit).
         std::string only;
         for (int i = 0; i < base_.rank; ++i)
-          if (!parameters_away_[static_cast<size_t>(i)] && parameters_fit_.determined[static_cast<size_t>(i)] &&
-              std::fabs(parameters_fit_.coef[i]) > parameters_z_ * parameters_fit_.stderr_[i])
+          if (!parameters_away_[static_cast<size_t>(i)] && contradicts(parameters_fit_, i, 1))
             only += (only.empty() ? "" : ", ") + base_.names[static_cast<size_t>(i)];
         if (!only.empty())
           notes_.push_back("`parameters` does not list " + only + ": contradicted only" + where + " (extended.xml states the whole fit)");
