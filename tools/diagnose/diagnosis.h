@@ -265,9 +265,8 @@ class Diagnosis {
   bool cause_needed(size_t i, const std::vector<size_t>& set, bool base_free) const;
   void eliminate_backward(bool base_free = true);
   void decide_parameters();
-  Fit iv_refit(const std::vector<int>& causes);
+  Fit iv_refit(const std::vector<int>& causes, const Eigen::VectorXd& mask = Eigen::VectorXd());
   Eigen::VectorXd away_from_reversals(double* half_width_s = nullptr) const;
-  Fit iv_refit_masked(const std::vector<int>& causes, const Eigen::VectorXd& mask);
   std::vector<int> kept_effects() const;
   // report_json.cc
   nlohmann::json metrics(const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test) const;
@@ -338,6 +337,7 @@ class Diagnosis {
   std::vector<double> scaled_keys(const Candidate& c, double a) const;
   bool scales_with_keys(const Candidate& c) const;
   void stateful_errors(Candidate& c, const Fit& current, const std::vector<double>& x) const;
+  void stateful_keys(const Candidate& c, nlohmann::json& params, nlohmann::json& se) const;
   void stateful_report(const Candidate& c, double amplitude, nlohmann::json& params, nlohmann::json& se, nlohmann::json& j) const;
   Eigen::VectorXd written_stateful(const SplitData& s, const mjModel* ext) const;
   // unexplained.cc (#22)
@@ -374,7 +374,7 @@ class Diagnosis {
   double parameters_delta_bic_ = 0, parameters_n_eff_ = 0;
   int parameters_contradicted_ = 0;
   int parameters_contradicted_away_ = -1;   // ... of them, by the rows away from velocity reversals (-1: not checked)
-  std::vector<bool> parameters_away_;       // per base parameter: contradicted there too (empty: not checked)
+  std::vector<bool> parameters_listed_;     // per base parameter: contradicted, there too where checked (`parameters`' list)
   Eigen::VectorXd written_weights_;     // decide_parameters: each output's row weight in the written fit (design.h: output_weights)
   double parameters_z_ = 3;             // the standard errors beyond which a base parameter contradicts the MJCF (decide_parameters)
   Fit parameters_fit_;                  // the free fit whose estimates decide `parameters` (ls or iv)

@@ -56,36 +56,6 @@ Eigen::VectorXd Diagnosis::away_from_reversals(double* half_width_s) const {
   return mask;
 }
 
-namespace {
-
-BlockColumns masked(const BlockColumns& b, const Eigen::VectorXd& mask) {
-  BlockColumns out = b;
-  for (size_t a = 0; a < out.active.size(); ++a)
-    out.parts[a].array().colwise() *= mask.segment(out.active[a] * out.rows_per_output, out.rows_per_output).array();
-  return out;
-}
-
-}  // namespace
-
-// iv_refit on the rows where mask is 1 (the others zeroed in the target, the columns and the
-// instruments: equations that say nothing).
-Fit Diagnosis::iv_refit_masked(const std::vector<int>& causes, const Eigen::VectorXd& mask) {
-  iv_refit(causes);   // the instruments, simulated once
-  std::vector<BlockColumns> cols, zs;
-  cols.reserve(causes.size() + 1);
-  zs.reserve(causes.size() + 1);
-  cols.push_back(masked(fit_.base, mask));
-  for (int c : causes) cols.push_back(masked(cands_[static_cast<size_t>(c)].fit_cols, mask));
-  std::vector<const BlockColumns*> F, Z;
-  for (const auto& c : cols) F.push_back(&c);
-  const Eigen::VectorXd y = fit_.y0.cwiseProduct(mask);
-  if (!twin_) return fit_blocks(F, y, false, fit_.N);
-  zs.push_back(masked(twin_->base, mask));
-  for (int c : causes) zs.push_back(masked(columns_of(cands_[static_cast<size_t>(c)], *twin_), mask));
-  for (const auto& z : zs) Z.push_back(&z);
-  return iv_fit_blocks(F, Z, y, fit_.N);
-}
-
 double Diagnosis::rss_on(const Eigen::VectorXd& r, const std::vector<int>& outputs, Eigen::Index N) const {
   double s = 0;
   for (int o : outputs) s += r.segment(o * N, N).squaredNorm();

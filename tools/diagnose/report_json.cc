@@ -88,8 +88,7 @@ nlohmann::json Diagnosis::parameters_cause(MjcfEdits& edits, std::vector<std::st
     }
     // Contradicted: the estimate lies beyond parameters_z_ standard errors of the MJCF's value,
     // on every row and on the rows away from velocity reversals (decide_parameters).
-    if (std::fabs(d) <= parameters_z_ * e) continue;
-    if (!parameters_away_.empty() && !parameters_away_[static_cast<size_t>(i)]) continue;
+    if (!parameters_listed_[static_cast<size_t>(i)]) continue;
     params[name] = base_.model_values[i] + d;
     se[name] = e;
     prior[name] = base_.model_values[i];

@@ -420,8 +420,9 @@ void Diagnosis::decide_parameters() {
   auto contradicts = [&](const Fit& f, int i, double grow) {
     return f.determined[static_cast<size_t>(i)] && std::fabs(f.coef[i]) > parameters_z_ * f.stderr_[i] * grow;
   };
-  parameters_contradicted_ = 0;
-  for (int i = 0; i < base_.rank; ++i) parameters_contradicted_ += contradicts(parameters_fit_, i, 1);
+  parameters_listed_.assign(static_cast<size_t>(base_.rank), false);
+  for (int i = 0; i < base_.rank; ++i) parameters_listed_[static_cast<size_t>(i)] = contradicts(parameters_fit_, i, 1);
+  parameters_contradicted_ = static_cast<int>(std::count(parameters_listed_.begin(), parameters_listed_.end(), true));
   // The held-out gain under either noise model: one variance for every joint (the residual sum
   // of squares in N m^2) or one per joint (the geometric mean of each joint's sum relative to
   // its own as given). The base parameters act on every joint: a contradiction on a small joint
@@ -443,30 +444,27 @@ void Diagnosis::decide_parameters() {
   // a 5 Hz import, none through 40 Hz). The same test, estimator and bar on the rows of each
   // joint farther from its reversals than half the low-pass's period (away_from_reversals).
   parameters_contradicted_away_ = -1;
-  parameters_away_.clear();
   if (parameters_named_ && opt_.estimator == "iv") {
     double half_width = 0;
     const Eigen::VectorXd away = away_from_reversals(&half_width);
     if (away.size() == fit_.y0.size() && away.sum() < static_cast<double>(away.size())) {
-      const Fit m = iv_refit_masked(effects, away);
-      parameters_away_.assign(static_cast<size_t>(base_.rank), false);
-      for (int i = 0; i < base_.rank; ++i)
-        parameters_away_[static_cast<size_t>(i)] = contradicts(parameters_fit_, i, 1) && contradicts(m, i, grown[i]) && m.coef[i] * parameters_fit_.coef[i] > 0;
-      parameters_contradicted_away_ = static_cast<int>(std::count(parameters_away_.begin(), parameters_away_.end(), true));
+      const Fit m = iv_refit(effects, away);
+      // Listed: contradicted on every row and, the same way, on these.
+      std::string only;
+      for (int i = 0; i < base_.rank; ++i) {
+        if (!parameters_listed_[static_cast<size_t>(i)] || (contradicts(m, i, grown[i]) && m.coef[i] * parameters_fit_.coef[i] > 0)) continue;
+        parameters_listed_[static_cast<size_t>(i)] = false;
+        only += (only.empty() ? "" : ", ") + base_.names[static_cast<size_t>(i)];
+      }
+      parameters_contradicted_away_ = static_cast<int>(std::count(parameters_listed_.begin(), parameters_listed_.end(), true));
       const std::string where = " with the rows near velocity reversals (within " + fmt(1e3 * half_width, 3) + " ms of one, " +
                                 fmt(100 * (1 - away.mean()), 2) + " % of the rows), where a friction's switch through the data's low-pass is least exact";
       if (parameters_contradicted_away_ == 0) {
         parameters_named_ = false;
         notes_.push_back("the MJCF's base parameters are contradicted only" + where + "; on the others none lies beyond " +
                          fmt(parameters_z_, 3) + " standard errors: `parameters` is not named");
-      } else {
-        // Said, so that a reader sees what the listing leaves out (extended.xml states the whole fit).
-        std::string only;
-        for (int i = 0; i < base_.rank; ++i)
-          if (!parameters_away_[static_cast<size_t>(i)] && contradicts(parameters_fit_, i, 1))
-            only += (only.empty() ? "" : ", ") + base_.names[static_cast<size_t>(i)];
-        if (!only.empty())
-          notes_.push_back("`parameters` does not list " + only + ": contradicted only" + where + " (extended.xml states the whole fit)");
+      } else if (!only.empty()) {   // said, so that a reader sees what the listing leaves out
+        notes_.push_back("`parameters` does not list " + only + ": contradicted only" + where + " (extended.xml states the whole fit)");
       }
     }
   }
@@ -483,8 +481,10 @@ void Diagnosis::decide_parameters() {
 // The free fit of the base parameters and `causes` by instrumental variables; the instruments
 // (the fit split on the model's simulated states, prepared and filtered like the fit split)
 // are simulated once. Falls back to least squares, said in the notes, when the model cannot
-// be simulated along the data (no time stamps, divergence).
-Fit Diagnosis::iv_refit(const std::vector<int>& causes) {
+// be simulated along the data (no time stamps, divergence). `mask` (stacked 0/1 per row of
+// the fit split; empty: every row): the rows the fit uses, the others zeroed in the target,
+// the columns and the instruments (equations that say nothing).
+Fit Diagnosis::iv_refit(const std::vector<int>& causes, const Eigen::VectorXd& mask) {
   if (!twin_ && parameters_estimator_.empty()) {
     try {
       InstrumentOptions io;
@@ -500,12 +500,23 @@ Fit Diagnosis::iv_refit(const std::vector<int>& causes) {
       parameters_estimator_ = "ls";
     }
   }
-  if (!twin_) return refit(causes, true, true);
-  std::vector<BlockColumns> zs;
-  zs.reserve(causes.size());
-  std::vector<const BlockColumns*> inst{&twin_->base};
-  for (int c : causes) inst.push_back(&zs.emplace_back(columns_of(cands_[static_cast<size_t>(c)], *twin_)));
-  return iv_fit_blocks(blocks(causes, true), inst, fit_.y0, fit_.N);
+  const bool masking = mask.size() > 0;
+  std::vector<BlockColumns> owned;   // the instruments' cause columns, and masked copies
+  owned.reserve(3 * causes.size() + 2);
+  auto use = [&](const BlockColumns& b) -> const BlockColumns* {
+    if (!masking) return &b;
+    BlockColumns& m = owned.emplace_back(b);
+    for (size_t a = 0; a < m.active.size(); ++a)
+      m.parts[a].array().colwise() *= mask.segment(m.active[a] * m.rows_per_output, m.rows_per_output).array();
+    return &m;
+  };
+  std::vector<const BlockColumns*> F;
+  for (const BlockColumns* b : blocks(causes, true)) F.push_back(use(*b));
+  const Eigen::VectorXd y = masking ? Eigen::VectorXd(fit_.y0.cwiseProduct(mask)) : fit_.y0;
+  if (!twin_) return masking ? fit_blocks(F, y, false, fit_.N) : refit(causes, true, true);
+  std::vector<const BlockColumns*> inst{use(twin_->base)};
+  for (int c : causes) inst.push_back(use(owned.emplace_back(columns_of(cands_[static_cast<size_t>(c)], *twin_))));
+  return iv_fit_blocks(F, inst, y, fit_.N);
 }
 
 }  // namespace spml::diagnose_detail

@@ -440,10 +440,7 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
     c.searched = true;
     // What the fit found, so that a reader can see which end a key ran to, or how loose a level is.
     nlohmann::json params, se;
-    for (size_t k = 0; k < ns; ++k) {
-      params[c.shape[k]->key] = c.shape_values[k];
-      se[c.shape[k]->key] = k < c.stateful_se.size() ? c.stateful_se[k] : std::numeric_limits<double>::infinity();
-    }
+    stateful_keys(c, params, se);
     not_tried_.push_back({{"effect", c.plugin->name}, {"joint", c.joint_name}, {"reason", "fitted by simulation, but its " + why},
                           {"not_identifiable", c.not_identifiable}, {"params", params}, {"stderr", se}});
   };
@@ -791,16 +788,21 @@ bool Diagnosis::scales_with_keys(const Candidate& c) const {
   }
 }
 
+// Every key of a stateful fit with its standard error (infinite: unbounded, or not computed).
+void Diagnosis::stateful_keys(const Candidate& c, nlohmann::json& params, nlohmann::json& se) const {
+  for (size_t k = 0; k < c.shape.size(); ++k) {
+    params[c.shape[k]->key] = c.shape_values[k];
+    se[c.shape[k]->key] = k < c.stateful_se.size() ? c.stateful_se[k] : std::numeric_limits<double>::infinity();
+  }
+}
+
 // The report's parameters of a stateful cause: every fitted key with its standard error, the
 // amplitude the joint fit gave the simulated force (1: as fitted), and the keys the data do not
 // determine. extended.xml writes the keys with the amplitude refitted against the written
 // parameters where the force scales with them (refit_written_effects: `params_written`), else
 // as fitted.
 void Diagnosis::stateful_report(const Candidate& c, double amplitude, nlohmann::json& params, nlohmann::json& se, nlohmann::json& j) const {
-  for (size_t k = 0; k < c.shape.size(); ++k) {
-    params[c.shape[k]->key] = c.shape_values[k];
-    se[c.shape[k]->key] = k < c.stateful_se.size() ? c.stateful_se[k] : std::numeric_limits<double>::infinity();
-  }
+  stateful_keys(c, params, se);
   j["amplitude"] = amplitude;
   j["not_identifiable"] = c.not_identifiable;
   j["fitted_by"] = "simulation (output error along the measured motion)";
