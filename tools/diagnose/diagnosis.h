@@ -327,6 +327,9 @@ class Diagnosis {
   bool is_level(const spml_shape_param* sp) const;
   StatefulSpace stateful_space(const Candidate& c) const;
   void profile_once(int k, const Fit& current);
+  int principal_level(const Candidate& c, const std::vector<bool>& level) const;
+  double reversal_crossing(int joint, double v) const;
+  bool unresolved_speed(int joint, double v) const;
   bool shaped(const Candidate& c) const;
   bool beats_static(const Candidate& c, double bar, double rss) const;
   double stateful_gain(const Candidate& c) const;   // the held-out gain beats_static asks of it
