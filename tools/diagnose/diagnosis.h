@@ -352,6 +352,7 @@ class Diagnosis {
   std::pair<Eigen::VectorXd, Eigen::VectorXd> write_scored(const std::string& ext_path, MjcfEdits& e, std::vector<std::string>& n);
   void choose_partial(const std::string& ext_path, MjcfEdits& edits, std::vector<std::string>& notes,
                       std::pair<Eigen::VectorXd, Eigen::VectorXd>& written);
+  void restore_superseded(size_t rejected, size_t first, MjcfEdits& edits, std::vector<std::string>& notes);
   bool refit_written_effects(const std::string& ext_path, MjcfEdits& edits, std::vector<std::string>& notes);
   bool guard_held_out(const std::string& ext_path, MjcfEdits& edits, std::vector<std::string>& notes,
                       std::pair<Eigen::VectorXd, Eigen::VectorXd>& written);
