@@ -27,13 +27,15 @@ std::string params_text(const nlohmann::json& c, const std::string& sep) {
   // What extended.xml states: an effect's params_written; for `parameters`, the consistent fit's
   // joint terms (an armature estimated at -0.09 is written 0), except on joints whose terms were
   // rejected (left at the MJCF's).
-  nlohmann::json written = c.value("params_written", nlohmann::json::object());
+  // A rejected cause is not in extended.xml: nothing of it is said to be there.
+  const bool in_file = !c.contains("rejected");
+  nlohmann::json written = in_file ? c.value("params_written", nlohmann::json::object()) : nlohmann::json::object();
   const nlohmann::json rejected = c.value("rejected_joint_terms", nlohmann::json::object());
   auto rejected_term = [&](const std::string& name) {   // "damping:joint6" on a joint whose terms were rejected
     const auto colon = name.rfind(':');
     return colon != std::string::npos && rejected.contains(name.substr(colon + 1));
   };
-  if (c.contains("written") && c["written"].contains("terms"))
+  if (in_file && c.contains("written") && c["written"].contains("terms"))
     for (const auto& [name, term] : c["written"]["terms"].items())
       if (term.contains("value") && !rejected_term(name)) written[name] = term["value"];
   for (auto it = c["params"].begin(); it != c["params"].end(); ++it) {
