@@ -85,6 +85,7 @@ std::vector<InverseMismatch> MjcfRegressor::inverse_mismatches(int states, std::
           std::find(inst.decl.joints.begin(), inst.decl.joints.end(), mm.joint) != inst.decl.joints.end())
         mm.reasons.push_back("the declared plugin '" + inst.decl.instance + "' (" + inst.decl.type + ", " +
                              (inst.plugin().advance ? "stateful" : "not linear in its parameters") + ") has no regressor columns");
+    mm.plugins_only = !mm.reasons.empty() && kinds[static_cast<size_t>(v)].empty();
     mm.reasons.insert(mm.reasons.end(), kinds[static_cast<size_t>(v)].begin(), kinds[static_cast<size_t>(v)].end());
     if (mm.reasons.empty()) mm.reasons.push_back("an element the regressor does not model (fluid forces, a nonlinear passive force?)");
     out.push_back(std::move(mm));

@@ -619,8 +619,14 @@ TEST(MjcfRegressor, InverseCheckNamesFrictionlossStatefulPluginsAndConstraints) 
   EXPECT_NE(spml::inverse_mismatch_text(ss[0]).find("the declared plugin 'ss' (stick_slip, stateful) has no regressor columns"),
             std::string::npos)
       << spml::inverse_mismatch_text(ss[0]);
+  // Explained by the plugin alone (diagnose simulates it: a note, no warning); frictionloss is not.
+  EXPECT_TRUE(ss[0].plugins_only);
+  EXPECT_FALSE(fl[0].plugins_only);
   // An equality constraint couples joint1 and joint2.
   auto eq = mismatches_of(arm_with("", "<equality><joint joint1=\"joint1\" joint2=\"joint2\"/></equality>"));
   ASSERT_FALSE(eq.empty());
-  for (const auto& mm : eq) EXPECT_NE(spml::inverse_mismatch_text(mm).find("an equality constraint"), std::string::npos) << mm.joint;
+  for (const auto& mm : eq) {
+    EXPECT_NE(spml::inverse_mismatch_text(mm).find("an equality constraint"), std::string::npos) << mm.joint;
+    EXPECT_FALSE(mm.plugins_only) << mm.joint;
+  }
 }

@@ -36,6 +36,7 @@ struct InverseMismatch {
   double relative = 0;   // worst |Y pi - qfrc_inverse| over the states / RMS of qfrc_inverse
   double worst = 0, rms = 0;
   std::vector<std::string> reasons;   // the likely ones: unmodelled plugins, constraint kinds
+  bool plugins_only = false;          // every reason is a declared plugin without regressor columns
 };
 // "joint 'j': ... differs ... by up to ... likely <reasons> ...", for a warning or a note.
 std::string inverse_mismatch_text(const InverseMismatch& mismatch);
