@@ -188,7 +188,7 @@ void Diagnosis::restore_superseded(size_t rejected, size_t first, MjcfEdits& edi
     if (config.empty()) continue;
     causes_[s].superseded_by.clear();
     sj.erase("superseded_by");
-    edits.texts.emplace_back(declaration_name(c), "type=" + std::string(c.plugin->name) + " joints=" + c.joint_name + " " + config);
+    edits.texts.emplace_back(declaration_name(c), declaration_text(c, config));
     sj["declaration"] = edits.texts.back().second;
     sj["restored"] = {{"reason", "the " + std::string(r.plugin->name) + " on " + r.joint_name + " that superseded it is rejected; extended.xml writes this cause in its place"}};
     notes.push_back(std::string(c.plugin->name) + " on " + c.joint_name + " is written again in place of the rejected " + r.plugin->name + " that had superseded it");
@@ -284,7 +284,7 @@ bool Diagnosis::refit_written_effects(const std::string& ext_path, MjcfEdits& ed
         const auto pnames = inst.param_names();
         for (Eigen::Index k = 0; k < theta.size(); ++k) pw[pnames[static_cast<size_t>(k)]] = theta[k];
       }
-      const std::string decl = "type=" + std::string(c.plugin->name) + " joints=" + c.joint_name + " " + inst.config_text();
+      const std::string decl = declaration_text(c, inst.config_text());
       changed |= decl != text->second;
       text->second = decl;
       cj["declaration"] = decl;

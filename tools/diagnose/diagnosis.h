@@ -106,6 +106,10 @@ bool is_stateful(const spml_force_plugin& p);   // #22: advance/reset and no reg
 // The <custom><text> name a named effect is declared under in extended.xml.
 inline constexpr const char* kDiagnosedPrefix = "spml.plugin.diagnosed_";
 inline std::string declaration_name(const Candidate& c) { return kDiagnosedPrefix + std::string(c.plugin->name) + "_" + c.joint_name; }
+// Its declaration in extended.xml, with the plugin's own configuration text.
+inline std::string declaration_text(const Candidate& c, const std::string& config) {
+  return "type=" + std::string(c.plugin->name) + " joints=" + c.joint_name + " " + config;
+}
 
 // #22: a delay worth correcting removes a tenth of the held-out residual (delay.cc).
 inline constexpr double kMinDelayGain = 0.1;

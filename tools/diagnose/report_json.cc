@@ -175,7 +175,7 @@ nlohmann::json Diagnosis::effect_cause(size_t i, const Fit& final_fit, bool free
       notes.push_back("joint '" + c.joint_name + "' has a space or comma in its name, which a plugin declaration (joints=a,b) cannot hold: " +
                       c.plugin->name + " on it is not in the extended model");
     else {
-      edits.texts.emplace_back(name, "type=" + std::string(c.plugin->name) + " joints=" + c.joint_name + " " + config);
+      edits.texts.emplace_back(name, declaration_text(c, config));
       j["declaration"] = edits.texts.back().second;
     }
   }
