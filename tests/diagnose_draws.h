@@ -93,17 +93,24 @@ inline Dataset exact_dataset(const std::string& model_path, const std::vector<st
 // A log of the model `truth` made as a user makes one (spml generate with the options
 // `generate`, spml import with the options `import`), diagnosed on the model `given` in `dir`,
 // `rollouts` of the confirmation in simulation (0: none). Prints the summary; returns report.json.
+// A log of the model at `true_model` as a user makes one: `spml generate --model TRUE <generate>`
+// into dir/NAME.csv, then `spml import <import>` into dir/NAME.h5 (returned).
+inline std::string generated_log(const std::filesystem::path& dir, const std::string& true_model, const std::string& generate,
+                                 const std::string& import, const std::string& name = "log") {
+  const std::string csv = (dir / (name + ".csv")).string(), h5 = (dir / (name + ".h5")).string(), bin = spml_bin();
+  EXPECT_EQ(run(bin + " generate --model '" + true_model + "' " + generate + " -q -o '" + csv + "' 2>&1").exit_code, 0);
+  EXPECT_EQ(run(bin + " import '" + csv + "' " + import + " --out '" + h5 + "' 2>&1").exit_code, 0);
+  return h5;
+}
+
 inline nlohmann::json diagnose_generated(const std::filesystem::path& dir, const std::string& given, const std::string& truth,
                                         const std::string& generate, const std::string& import, int rollouts = 0) {
   const std::string user = (dir / "user.xml").string(), true_model = (dir / "true.xml").string();
   std::ofstream(user) << given;
   std::ofstream(true_model) << truth;
-  const std::string csv = (dir / "log.csv").string(), h5 = (dir / "log.h5").string(), bin = spml_bin();
-  EXPECT_EQ(run(bin + " generate --model '" + true_model + "' " + generate + " -q -o '" + csv + "' 2>&1").exit_code, 0);
-  EXPECT_EQ(run(bin + " import '" + csv + "' " + import + " --out '" + h5 + "' 2>&1").exit_code, 0);
   DiagnoseOptions o;
   o.model = user;
-  o.data = h5;
+  o.data = generated_log(dir, true_model, generate, import);
   o.rollouts = rollouts;
   DiagnoseResult r = diagnose(o, "");
   std::cout << r.summary;

@@ -696,6 +696,9 @@ const std::string kReviewArm = R"(<mujoco model="rev_arm">
   </worldbody>
 </mujoco>
 )";
+// Its logs imported as `spml generate` suggests: the 10 Hz low-pass, decimated to 200 Hz.
+const std::string kReviewArmImport =
+    "--t t --x 'q:yaw,q:shoulder,q:elbow' --y 'tau:yaw,tau:shoulder,tau:elbow' --lowpass 10 --derive --drop-edges 612 --decimate 5";
 
 // A review's 3-hinge arm with LuGre friction on its elbow (fc 0.1, fs 0.2, vs 0.03; 1 %, 18 bit,
 // the 10 Hz import): `coulomb` is named (0.227 % held out), then `stribeck` supersedes it and
@@ -706,8 +709,7 @@ TEST(DiagnoseCases, ARejectedCauseGivesItsPlaceBackToTheOneItSuperseded) {
   const auto dir = test::temp_dir("dc-restore");
   const auto r = diagnose_user_log(dir, kReviewArm, "type=stick_slip joints=elbow fc=0.1 fs=0.2 vs=0.03 sigma0=100 sigma1=1 sigma2=0",
                                    "--seed 17 --duration 25 --torque-noise 0.01 --encoder-bits 18",
-                                   "--t t --x 'q:yaw,q:shoulder,q:elbow' --y 'tau:yaw,tau:shoulder,tau:elbow' --lowpass 10 --derive "
-                                   "--drop-edges 612 --decimate 5");
+                                   kReviewArmImport);
   bool written = false;
   for (const auto& c : r["causes"])
     if (c["joints"][0] == "elbow" && c.contains("declaration") && !c.contains("superseded_by") && !c.contains("rejected")) written = true;
@@ -726,8 +728,7 @@ TEST(DiagnoseCases, TheCoulombLevelBesideAFlatHumpIsDetermined) {
   const auto dir = test::temp_dir("dc-principal");
   const auto r = diagnose_user_log(dir, kReviewArm, "type=stick_slip joints=shoulder fc=1.0 fs=1.3 vs=0.04 sigma0=1000 sigma1=6 sigma2=0",
                                    "--seed 18 --duration 25 --torque-noise 0.015 --encoder-bits 16",
-                                   "--t t --x 'q:yaw,q:shoulder,q:elbow' --y 'tau:yaw,tau:shoulder,tau:elbow' --lowpass 10 --derive "
-                                   "--drop-edges 612 --decimate 5");
+                                   kReviewArmImport);
   bool named = false;
   for (const auto& c : r["causes"])
     if (c["effect"] == "stick_slip" && c["joints"][0] == "shoulder") {
@@ -748,19 +749,13 @@ TEST(DiagnoseCases, TheCoulombLevelBesideAFlatHumpIsDetermined) {
 // cause extended.xml leaves out is marked rejected, and report.md says no value of it is there.
 TEST(DiagnoseCases, TheReportStatesOnlyWhatExtendedXmlHolds) {
   const auto dir = test::temp_dir("dc-states");
-  std::string truth = kReviewArm;
-  truth.replace(truth.find("  <worldbody>"), 0,
-                "  <custom><text name=\"spml.plugin.x\" data=\"type=stick_slip joints=shoulder fc=0.7 fs=1.0 vs=0.12 sigma0=350 sigma1=4 sigma2=0\"/></custom>\n");
-  const std::string given = (dir / "given.xml").string(), true_model = (dir / "true.xml").string(), bin = test::spml_bin();
+  const std::string given = (dir / "given.xml").string(), true_model = (dir / "true.xml").string();
   std::ofstream(given) << kReviewArm;
-  std::ofstream(true_model) << truth;
+  std::ofstream(true_model) << test::with_declarations(kReviewArm, {"type=stick_slip joints=shoulder fc=0.7 fs=1.0 vs=0.12 sigma0=350 sigma1=4 sigma2=0"});
   auto log = [&](int seed, const std::string& name) {
-    const std::string csv = (dir / (name + ".csv")).string(), h5 = (dir / (name + ".h5")).string();
-    EXPECT_EQ(test::run(bin + " generate --model '" + true_model + "' --seed " + std::to_string(seed) +
-                        " --duration 25 --torque-noise 0.01 --encoder-bits 18 -q -o '" + csv + "' 2>&1").exit_code, 0);
-    EXPECT_EQ(test::run(bin + " import '" + csv + "' --t t --x 'q:yaw,q:shoulder,q:elbow' --y 'tau:yaw,tau:shoulder,tau:elbow' "
-                        "--lowpass 10 --derive --drop-edges 612 --decimate 5 --out '" + h5 + "' 2>&1").exit_code, 0);
-    return h5;
+    return test::generated_log(dir, true_model, "--seed " + std::to_string(seed) + " --duration 25 --torque-noise 0.01 --encoder-bits 18",
+                               kReviewArmImport,
+                               name);
   };
   DiagnoseOptions first;
   first.model = given;

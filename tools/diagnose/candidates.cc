@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "diagnosis.h"
+#include "statistics.h"
 #include "spml/column_unit.h"
 #include "spml/parse.h"
 #include "spml/signal.h"
@@ -79,8 +80,7 @@ void Diagnosis::add_candidates(const spml_force_plugin& p, const std::vector<con
     if (std::string(p.name) == "ripple") {
       std::vector<double> speed(static_cast<size_t>(q.size()));
       for (Eigen::Index i = 0; i < q.size(); ++i) speed[static_cast<size_t>(i)] = std::fabs(fit_.split.X(i, fit_.cols->qd[static_cast<size_t>(j)]));
-      std::nth_element(speed.begin(), speed.begin() + static_cast<std::ptrdiff_t>(speed.size() / 2), speed.end());
-      if (!bound_wavenumber(c, q.maxCoeff() - q.minCoeff(), speed.empty() ? 0.0 : speed[speed.size() / 2])) continue;
+      if (!bound_wavenumber(c, q.maxCoeff() - q.minCoeff(), quantile(std::move(speed), 0.5))) continue;
     }
     cands_.push_back(std::move(c));
   }

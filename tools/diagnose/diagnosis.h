@@ -111,6 +111,10 @@ inline std::string declaration_text(const Candidate& c, const std::string& confi
   return "type=" + std::string(c.plugin->name) + " joints=" + c.joint_name + " " + config;
 }
 
+// Does a velocity change sign between two consecutive rows (through zero or onto it)? A
+// reversal, for every rule that looks at rows near one.
+inline bool reverses(double before, double after) { return (before > 0 && after <= 0) || (before < 0 && after >= 0); }
+
 // #22: a delay worth correcting removes a tenth of the held-out residual (delay.cc).
 inline constexpr double kMinDelayGain = 0.1;
 

@@ -550,9 +550,7 @@ int Diagnosis::principal_level(const Candidate& c, const std::vector<bool>& leve
   const Eigen::MatrixXd D = key_columns(c, &keys, level).dense();   // the levels only
   const auto o = static_cast<Eigen::Index>(std::find(out_joint_index_.begin(), out_joint_index_.end(), c.joint) - out_joint_index_.begin());
   const Eigen::VectorXd speed = fit_.split.X.col(fit_.cols->qd[static_cast<size_t>(c.joint)]).cwiseAbs();
-  std::vector<double> sorted(speed.data(), speed.data() + speed.size());
-  std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(3 * sorted.size() / 4), sorted.end());
-  const double fast = sorted.empty() ? 0 : sorted[3 * sorted.size() / 4];
+  const double fast = quantile(std::vector<double>(speed.data(), speed.data() + speed.size()), 0.75);
   int principal = -1;
   double largest = 0;
   for (size_t j = 0; j < keys.size(); ++j) {
@@ -571,10 +569,8 @@ double Diagnosis::reversal_crossing(int joint, double v) const {
   const auto qdd = fit_.split.X.col(fit_.cols->qdd[static_cast<size_t>(joint)]);
   std::vector<double> a;
   for (Eigen::Index i = 1; i < qd.size(); ++i)
-    if ((qd[i] > 0) != (qd[i - 1] > 0)) a.push_back(std::fabs(0.5 * (qdd[i] + qdd[i - 1])));
-  if (a.empty()) return 0;
-  std::nth_element(a.begin(), a.begin() + static_cast<std::ptrdiff_t>(a.size() / 2), a.end());
-  const double median = a[a.size() / 2];
+    if (reverses(qd[i - 1], qd[i])) a.push_back(std::fabs(0.5 * (qdd[i] + qdd[i - 1])));
+  const double median = quantile(std::move(a), 0.5);
   return median > 0 ? 2 * v / median : 0;
 }
 

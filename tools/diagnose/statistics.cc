@@ -48,6 +48,13 @@ Eigen::MatrixXd long_run_covariance(const Eigen::MatrixXd& Z, const Eigen::Vecto
   return S;
 }
 
+double quantile(std::vector<double> v, double share) {
+  if (v.empty()) return 0;
+  const auto at = std::min(v.size() - 1, static_cast<size_t>(share * static_cast<double>(v.size())));
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(at), v.end());
+  return v[at];
+}
+
 double familywise_z(double alpha, int k) {
   const double each = -std::expm1(std::log1p(-alpha) / std::max(k, 1));   // 1 - (1 - alpha)^(1/k), without cancellation
   // P(|Z| > z) = erfc(z / sqrt 2) falls monotonically: bisect it.

@@ -8,6 +8,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <vector>
 
 namespace spml::diagnose_detail {
 
@@ -21,6 +22,9 @@ double effective_fraction(const Eigen::VectorXd& r, Eigen::Index N);
 // Long-run covariance of the rows z_i = Z.row(i) (a stacked matrix, N rows per output), by
 // batch means with each output's block length from its residual segment.
 Eigen::MatrixXd long_run_covariance(const Eigen::MatrixXd& Z, const Eigen::VectorXd& r, Eigen::Index N);
+
+// The value at position floor(share * n) of v sorted (0 when v is empty): the median at 0.5.
+double quantile(std::vector<double> v, double share);
 
 // The two-sided normal bound z that each of k independent tests must pass for the family to
 // err with probability alpha: P(|Z| > z) = 1 - (1 - alpha)^(1/k) (Sidak).
