@@ -45,6 +45,7 @@
 namespace spml::diagnose_detail {
 
 using Clock = std::chrono::steady_clock;
+using Declarations = std::vector<std::pair<std::string, std::string>>;   // <custom><text> name and data, as MjcfEdits::texts
 inline double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 std::string fmt(double v, int precision = 4);
@@ -93,11 +94,13 @@ struct Candidate {
   // fit_cols is its simulated force (one column).
   bool stateful = false;
   std::vector<double> stateful_se;            // per shape key, absolute
+  Eigen::MatrixXd stateful_cov;               // per pair of shape keys, absolute (stateful_errors); infinite on a key that does not move the force
   std::vector<std::string> not_identifiable;  // keys with a relative standard error above 50 %, or that far apart between equally good fits
   bool profiled = false;                      // profile_once ran
   double written_scale = 1;                   // the written model's factor on its levels (refit_written_effects)
   std::vector<bool> at_edge;                  // per shape key: a side of it the plugin refuses at the fit (stateful_errors)
-  std::string loose_principal;                // profile_once: the level carrying most of its force, when the profile leaves it loose
+  std::string refusal;                        // profile_once: why the profile says it is not this effect (empty: it may be)
+  bool break_away_loose = false;              // profile_once: a level's gap above the principal one is small and not determined
   std::string lost_to_static;                 // the last held-out comparison it lost to the static frictions (note_lost), for not_tried
 };
 
@@ -336,14 +339,18 @@ class Diagnosis {
   StatefulSpace stateful_space(const Candidate& c) const;
   void profile_once(int k, const Fit& current);
   int principal_level(const Candidate& c, const std::vector<bool>& level) const;
+  bool gap_loose(const Candidate& c, size_t k, size_t principal) const;
   double reversal_crossing(int joint, double v) const;
   bool unresolved_speed(int joint, double v) const;
   bool shaped(const Candidate& c) const;
   bool beats_static(const Candidate& c, double bar, double rss) const;
   double stateful_gain(const Candidate& c) const;   // the held-out gain beats_static asks of it
   void note_lost(int k, double bar, double rss, double gain);
+  void refuse_profiled(int k);
+  Declarations declared(int k, const Fit& alone) const;
+  bool rolls_out_better(int k, const std::vector<int>& rivals);
   double static_bar(int joint, const std::vector<int>& order, const std::vector<int>& chosen, const Fit& before, const std::vector<int>& outs,
-                    double bar, int except = -1) const;
+                    double bar, int except = -1, std::vector<int>* passing = nullptr) const;
   BlockColumns key_columns(const Candidate& c, std::vector<size_t>* keys = nullptr, const std::vector<bool>& only = {}) const;
   std::vector<double> scaled_keys(const Candidate& c, double a) const;
   bool scales_with_keys(const Candidate& c) const;

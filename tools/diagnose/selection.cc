@@ -228,24 +228,25 @@ void Diagnosis::forward_backward() {
         // #22: only beyond the static frictions on its joint, held out (stateful_fit.cc)
         // A static friction it nests that is already chosen (Coulomb) is in the bar too: it is the current fit.
         const bool replaces = in_place(order[i], chosen).size() <= chosen.size();
+        std::vector<int> rivals;   // the static frictions on its joint: those chosen that it nests, and those that would join
+        for (int q : chosen)
+          if (nests(order[i], q)) rivals.push_back(q);
         const double bar = static_bar(c.joint, order, chosen, current, outs,
-                                      replaces ? rss_on(r_test, outs, test_.N) : std::numeric_limits<double>::infinity());
+                                      replaces ? rss_on(r_test, outs, test_.N) : std::numeric_limits<double>::infinity(), -1, &rivals);
         if (std::isfinite(bar) && !gains_on_test(bar, rss, opt_.min_gain, rss_floor(test_.b))) {   // beats_static's least bar, before the costly profile
           note_lost(order[i], bar, rss, opt_.min_gain);
           continue;
         }
         profile_once(order[i], current);
-        if (!c.loose_principal.empty()) {   // not this effect (profile_once)
-          cands_[static_cast<size_t>(order[i])].skipped = true;
-          not_tried_.push_back({{"effect", c.plugin->name}, {"joint", c.joint_name},
-                                {"reason", "fitted by simulation, but the level that carries most of its force (" + c.loose_principal +
-                                               ") is not determined by the data (profile): not this effect"}});
+        if (!c.refusal.empty()) {   // not this effect (profile_once)
+          refuse_profiled(order[i]);
           continue;
         }
         if (std::isfinite(bar) && !beats_static(c, bar, rss)) {
           note_lost(order[i], bar, rss, stateful_gain(c));
           continue;
         }
+        if (std::isfinite(bar) && c.break_away_loose && !rolls_out_better(order[i], rivals)) continue;
       }
       accepted = order[i];
       next = std::move(f);
