@@ -13,6 +13,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <filesystem>
 
@@ -371,7 +372,8 @@ bool Diagnosis::rolls_out_better(int k, const std::vector<int>& rivals) {
   Candidate& c = cands_[static_cast<size_t>(k)];
   if (opt_.rollouts <= 0) return true;
   const int windows = std::max(opt_.rollouts, kLeastWindows);
-  const fs::path path = fs::temp_directory_path() / ("spml-rival-" + std::to_string(::getpid()) + "-" + c.joint_name + ".xml");
+  static std::atomic<int> serial{0};   // diagnoses may run side by side in one process (the Python module)
+  const fs::path path = fs::temp_directory_path() / ("spml-rival-" + std::to_string(::getpid()) + "-" + std::to_string(serial++) + ".xml");
   auto error_with = [&](int q) {
     MjcfEdits e;
     e.texts = declared(q, refit({q}, false));
