@@ -514,6 +514,17 @@ TEST(DiagnoseBeyond, ABreakAwayTheLowPassHidesIsNotStatedAsDetermined) {
   for (int s : {222, 228, 204, 210}) expect_stick_slip(dir, s, 0, BreakAway::within_20_or_said_free);
 }
 
+// Seed-table draws whose LuGre fit ran to an end: 202's Stribeck speed to the bottom of its
+// range, 226's fs to fc with both levels determined. Each was refused for that and `coulomb`
+// named, whose written model predicts the joint several times worse. Such keys are not
+// identifiable, and the fit is named when it rolls out closer than every static friction on
+// the joint (paired t 2.3 and 2.0 over 60 windows): `stick_slip`, fs reported not
+// identifiable (0.77 and 0.50 of the truth).
+TEST(DiagnoseBeyond, ALuGreFitAtAnEndIsNamedWhenItRollsOutCloser) {
+  const auto dir = test::temp_dir("lugre_at_end");
+  for (int s : {202, 226}) expect_stick_slip(dir, s, 0, BreakAway::within_20_or_said_free);
+}
+
 // A friction experiment: the same draws excited at 0.1-0.3 Hz, slow reversals along which the
 // friction climbs to its break-away force (a reversal at deceleration a climbs it when a is
 // below about sigma0 vs^2 / fs): fc and fs within 20 %, fs determined. At the default band
@@ -700,10 +711,14 @@ TEST(DiagnoseBeyond, LuGreWithoutBreakAwayInItsLogIsNamedWithFsNotIdentifiable) 
 // `stick_slip` (named on both while a fit at that edge was let through). Draw 61 with a 5 ms
 // delay, 2 % torque noise and 16-bit encoders (a review's draw): fs = fc loose, and every
 // shape key loose too - Coulomb friction with bristles the data do not show - had beaten
-// Coulomb held out by the tenth an unshaped fit needs.
+// Coulomb held out by the tenth an unshaped fit needs. Draws 10 and 17 with a 5 ms delay (the
+// seed table's): a fit at the edge or with fs 2 % above fc, each joining only by rolling out
+// closer than the static frictions; 17's rolled out 1 % closer on the mean of 20 windows
+// (paired t 0.07) and was named; over 60 windows beyond two standard errors it is not.
 TEST(DiagnoseBeyond, CoulombWhoseLuGreFitRunsToTheEdgeIsCoulomb) {
   const auto dir = test::temp_dir("coulomb_edge");
-  for (const auto& [s, delay_ms, m] : {std::tuple{8, 0.0, Measurement{}}, std::tuple{10, 0.0, Measurement{}}, std::tuple{61, 5.0, noise_level(0.02, 16)}}) {
+  for (const auto& [s, delay_ms, m] : {std::tuple{8, 0.0, Measurement{}}, std::tuple{10, 0.0, Measurement{}}, std::tuple{61, 5.0, noise_level(0.02, 16)},
+                                       std::tuple{10, 5.0, Measurement{}}, std::tuple{17, 5.0, Measurement{}}}) {
     const Draw d = make_draw(dir, "delay_coulomb", s, delay_ms, m);
     const auto r = run_draw(dir, d, s);
     std::cout << d.what << ": named " << joined(named(r)) << "\n";

@@ -241,6 +241,17 @@ bool Diagnosis::dissipates(const Candidate& c) const {
   return C.cols() > 0;
 }
 
+// Does a static candidate hold a friction of a level: a column that opposes the motion and is
+// not a rate (asymmetric friction's fc_pos and fc_neg, beside its fv columns)?
+bool Diagnosis::holds_level_friction(const Candidate& c) const {
+  if (c.stateful) return false;
+  PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
+  const Eigen::MatrixXd C = columns(inst, fit_, false).dense();
+  for (Eigen::Index k = 0; k < C.cols(); ++k)
+    if (opposes_motion(C.col(k)) && rate_of(C.col(k)) == 0) return true;
+  return false;
+}
+
 std::string Diagnosis::injects_energy(const Candidate& c, const Eigen::VectorXd& theta, double damping) const {
   PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
   const Eigen::MatrixXd C = columns(inst, fit_, false).dense();

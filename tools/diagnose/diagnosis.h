@@ -100,7 +100,8 @@ struct Candidate {
   double written_scale = 1;                   // the written model's factor on its levels (refit_written_effects)
   std::vector<bool> at_edge;                  // per shape key: a side of it the plugin refuses at the fit (stateful_errors)
   std::string refusal;                        // profile_once: why the profile says it is not this effect (empty: it may be)
-  bool break_away_loose = false;              // profile_once: a level's gap above the principal one is small and not determined
+  bool break_away_loose = false;              // joins only by rolling out closer (rolls_out_better): a small loose gap of a level (profile_once), a key at an end (settle_levels)
+  std::string at_range_end;                   // settle_levels: the keys at an end of their range or at the plugin's edge
   std::string lost_to_static;                 // the last held-out comparison it lost to the static frictions (note_lost), for not_tried
 };
 
@@ -347,8 +348,9 @@ class Diagnosis {
   double stateful_gain(const Candidate& c) const;   // the held-out gain beats_static asks of it
   void note_lost(int k, double bar, double rss, double gain);
   void refuse_profiled(int k);
-  Declarations declared(int k, const Fit& alone) const;
-  bool rolls_out_better(int k, const std::vector<int>& rivals);
+  Declarations declared(const std::vector<int>& causes, const Fit& f) const;
+  bool holds_level_friction(const Candidate& c) const;
+  bool rolls_out_better(int k, const std::vector<int>& rivals, const std::vector<int>& beside);
   double static_bar(int joint, const std::vector<int>& order, const std::vector<int>& chosen, const Fit& before, const std::vector<int>& outs,
                     double bar, int except = -1, std::vector<int>* passing = nullptr) const;
   BlockColumns key_columns(const Candidate& c, std::vector<size_t>* keys = nullptr, const std::vector<bool>& only = {}) const;

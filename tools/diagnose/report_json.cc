@@ -271,8 +271,12 @@ void Diagnosis::build_report(const std::string& out_dir) {
   for (size_t k = 0; k < cands_.size(); ++k) {
     const Candidate& c = cands_[k];
     const bool used = std::any_of(causes_.begin(), causes_.end(), [&](const auto& cause) { return cause.candidate == static_cast<int>(k); });
-    if (!c.lost_to_static.empty() && !c.skipped && !used)
-      tried.push_back({{"effect", c.plugin->name}, {"joint", c.joint_name}, {"reason", c.lost_to_static}, {"not_identifiable", c.not_identifiable}});
+    if (!c.lost_to_static.empty() && !c.skipped && !used) {
+      nlohmann::json params, se;   // what the fit found, as for the fits settle_levels refuses
+      stateful_keys(c, params, se);
+      tried.push_back({{"effect", c.plugin->name}, {"joint", c.joint_name}, {"reason", c.lost_to_static}, {"not_identifiable", c.not_identifiable},
+                       {"params", params}, {"stderr", se}});
+    }
   }
   R["not_tried"] = tried;
   result_.timings.outputs += since(t0);

@@ -228,9 +228,10 @@ void Diagnosis::forward_backward() {
         // #22: only beyond the static frictions on its joint, held out (stateful_fit.cc)
         // A static friction it nests that is already chosen (Coulomb) is in the bar too: it is the current fit.
         const bool replaces = in_place(order[i], chosen).size() <= chosen.size();
-        std::vector<int> rivals;   // the static frictions on its joint: those chosen that it nests, and those that would join
+        std::vector<int> rivals, beside;   // the static frictions on its joint: those chosen that it nests, and those that would join; the chosen it would join beside
         for (int q : chosen)
           if (nests(order[i], q)) rivals.push_back(q);
+          else if (cands_[static_cast<size_t>(q)].joint == c.joint) beside.push_back(q);
         const double bar = static_bar(c.joint, order, chosen, current, outs,
                                       replaces ? rss_on(r_test, outs, test_.N) : std::numeric_limits<double>::infinity(), -1, &rivals);
         if (std::isfinite(bar) && !gains_on_test(bar, rss, opt_.min_gain, rss_floor(test_.b))) {   // beats_static's least bar, before the costly profile
@@ -246,7 +247,7 @@ void Diagnosis::forward_backward() {
           note_lost(order[i], bar, rss, stateful_gain(c));
           continue;
         }
-        if (std::isfinite(bar) && c.break_away_loose && !rolls_out_better(order[i], rivals)) continue;
+        if (c.break_away_loose && !rolls_out_better(order[i], rivals, beside)) continue;
       }
       accepted = order[i];
       next = std::move(f);
