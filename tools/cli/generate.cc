@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <iostream>
 
@@ -15,6 +16,26 @@
 
 namespace spml::cli {
 namespace {
+
+// The command that runs this spml: `spml` when that name on PATH is this binary, else its own
+// path (a review ran an installed copy off PATH and the printed `spml import` ran another one,
+// or none).
+std::string this_spml() {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const fs::path self = fs::read_symlink("/proc/self/exe", ec);
+  if (ec) return "spml";
+  const char* path = std::getenv("PATH");
+  for (std::string rest = path ? path : ""; !rest.empty();) {
+    const size_t colon = rest.find(':');
+    const std::string dir = rest.substr(0, colon);
+    rest = colon == std::string::npos ? "" : rest.substr(colon + 1);
+    if (dir.empty()) continue;
+    const fs::path candidate = fs::path(dir) / "spml";
+    if (fs::exists(candidate, ec)) return fs::equivalent(candidate, self, ec) ? "spml" : shell_quote(self.string());
+  }
+  return shell_quote(self.string());
+}
 
 // The --model options as typed; parsed into MeasurementOptions with messages naming the option.
 struct ModelArgs {
@@ -99,7 +120,7 @@ void generate_model(const ModelArgs& a, const std::string& out, std::uint64_t se
     // Decimated to about 200 Hz, the rate diagnose's realistic draws are validated at (a
     // review's LuGre log kept at 1 kHz had its friction refused and `parameters` named).
     const int keep = std::max(1, static_cast<int>(std::lround(o.rate / 200)));
-    std::cout << "next: spml import " << shell_quote(out) << " --t t --x " << shell_quote(q) << " --y " << shell_quote(tau)
+    std::cout << "next: " << this_spml() << " import " << shell_quote(out) << " --t t --x " << shell_quote(q) << " --y " << shell_quote(tau)
               << " --lowpass 10 --derive --drop-edges " << (o.rate > 20 ? settling_samples(butterworth_lowpass(4, 10, o.rate)) : 0)
               << (keep > 1 ? " --decimate " + std::to_string(keep) : std::string()) << " --out DATA.h5\n";
   }
