@@ -234,22 +234,22 @@ bool Diagnosis::dissipates(const Candidate& c) const {
     for (size_t p = 0; p < c.fit_cols.parts.size(); ++p) power -= c.fit_cols.parts[p].col(0).dot(fit_qd(c.fit_cols.active[p]));
     return power < 0;
   }
-  PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
-  const Eigen::MatrixXd C = columns(inst, fit_, false).dense();
-  for (Eigen::Index k = 0; k < C.cols(); ++k)
-    if (!opposes_motion(C.col(k)) || rate_of(C.col(k)) != 0) return false;
-  return C.cols() > 0;
+  const auto [levels, cols] = level_friction_columns(c);
+  return cols > 0 && levels == cols;
 }
 
 // Does a static candidate hold a friction of a level: a column that opposes the motion and is
 // not a rate (asymmetric friction's fc_pos and fc_neg, beside its fv columns)?
-bool Diagnosis::holds_level_friction(const Candidate& c) const {
-  if (c.stateful) return false;
+bool Diagnosis::holds_level_friction(const Candidate& c) const { return !c.stateful && level_friction_columns(c).first > 0; }
+
+// How many of a static candidate's columns (checked unfiltered) oppose the motion and are no
+// rate, and how many columns it has.
+std::pair<Eigen::Index, Eigen::Index> Diagnosis::level_friction_columns(const Candidate& c) const {
   PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
   const Eigen::MatrixXd C = columns(inst, fit_, false).dense();
-  for (Eigen::Index k = 0; k < C.cols(); ++k)
-    if (opposes_motion(C.col(k)) && rate_of(C.col(k)) == 0) return true;
-  return false;
+  Eigen::Index levels = 0;
+  for (Eigen::Index k = 0; k < C.cols(); ++k) levels += opposes_motion(C.col(k)) && rate_of(C.col(k)) == 0;
+  return {levels, C.cols()};
 }
 
 std::string Diagnosis::injects_energy(const Candidate& c, const Eigen::VectorXd& theta, double damping) const {

@@ -430,11 +430,9 @@ bool Diagnosis::rolls_out_better(int k, const std::vector<int>& rivals, const st
   std::error_code ignored;
   fs::remove(path, ignored);
   if (least_t > kPairedT) return true;
-  std::string loose;
-  for (const auto& key : c.not_identifiable) loose += (loose.empty() ? "" : ", ") + key;
   c.lost_to_static = "fitted by simulation, but " +
                      (c.at_range_end.empty() ? std::string("its break-away is not determined") : c.at_range_end + " ran to the end of the declared range or the edge of what the effect accepts") +
-                     " (" + loose + " loose), and the model as given with it does not roll out closer on " + c.joint_name + " than with " + worst +
+                     " (" + comma_list(c.not_identifiable) + " loose), and the model as given with it does not roll out closer on " + c.joint_name + " than with " + worst +
                      " beyond the windows' noise (" + std::to_string(kWindows) + " windows of " + fmt(opt_.rollout_seconds) + " s: mean end error " + fmt(mine) +
                      " against " + fmt(theirs) + ", paired t " + fmt(least_t, 3) + ", needs " + fmt(kPairedT, 2) + ")";
   return false;

@@ -115,6 +115,13 @@ inline std::string declaration_text(const Candidate& c, const std::string& confi
   return "type=" + std::string(c.plugin->name) + " joints=" + c.joint_name + " " + config;
 }
 
+// Names as one line, "a, b, c" (the keys of a message).
+inline std::string comma_list(const std::vector<std::string>& names) {
+  std::string out;
+  for (const auto& n : names) out += (out.empty() ? "" : ", ") + n;
+  return out;
+}
+
 // Does a velocity change sign between two consecutive rows (through zero or onto it)? A
 // reversal, for every rule that looks at rows near one.
 inline bool reverses(double before, double after) { return (before > 0 && after <= 0) || (before < 0 && after >= 0); }
@@ -350,7 +357,9 @@ class Diagnosis {
   void refuse_profiled(int k);
   Declarations declared(const std::vector<int>& causes, const Fit& f) const;
   bool holds_level_friction(const Candidate& c) const;
+  std::pair<Eigen::Index, Eigen::Index> level_friction_columns(const Candidate& c) const;
   bool rolls_out_better(int k, const std::vector<int>& rivals, const std::vector<int>& beside);
+  void chosen_around(int k, const std::vector<int>& chosen, std::vector<int>& nested, std::vector<int>& beside) const;
   double static_bar(int joint, const std::vector<int>& order, const std::vector<int>& chosen, const Fit& before, const std::vector<int>& outs,
                     double bar, int except = -1, std::vector<int>* passing = nullptr) const;
   BlockColumns key_columns(const Candidate& c, std::vector<size_t>* keys = nullptr, const std::vector<bool>& only = {}) const;

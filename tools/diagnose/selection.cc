@@ -229,9 +229,7 @@ void Diagnosis::forward_backward() {
         // A static friction it nests that is already chosen (Coulomb) is in the bar too: it is the current fit.
         const bool replaces = in_place(order[i], chosen).size() <= chosen.size();
         std::vector<int> rivals, beside;   // the static frictions on its joint: those chosen that it nests, and those that would join; the chosen it would join beside
-        for (int q : chosen)
-          if (nests(order[i], q)) rivals.push_back(q);
-          else if (cands_[static_cast<size_t>(q)].joint == c.joint) beside.push_back(q);
+        chosen_around(order[i], chosen, rivals, beside);
         const double bar = static_bar(c.joint, order, chosen, current, outs,
                                       replaces ? rss_on(r_test, outs, test_.N) : std::numeric_limits<double>::infinity(), -1, &rivals);
         if (std::isfinite(bar) && !gains_on_test(bar, rss, opt_.min_gain, rss_floor(test_.b))) {   // beats_static's least bar, before the costly profile
@@ -288,6 +286,14 @@ bool Diagnosis::nests(int larger, int smaller) const {
   const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(A);
   const Eigen::MatrixXd left = B - A * qr.solve(B);
   return left.norm() <= 1e-8 * B.norm();
+}
+
+// The chosen causes on candidate k's joint: those it nests (it would replace them) go to
+// `nested`, the others (it would join beside them) to `beside`.
+void Diagnosis::chosen_around(int k, const std::vector<int>& chosen, std::vector<int>& nested, std::vector<int>& beside) const {
+  for (int q : chosen)
+    if (nests(k, q)) nested.push_back(q);
+    else if (cands_[static_cast<size_t>(q)].joint == cands_[static_cast<size_t>(k)].joint) beside.push_back(q);
 }
 
 // The causes a candidate is tried with: the chosen ones it does not nest, and itself.

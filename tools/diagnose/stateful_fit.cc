@@ -480,13 +480,14 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
   // break-away, had `coulomb` named where the stateful fit explained what Coulomb left). It is
   // reported not identifiable, and the fit held to the higher bar of an unshaped one (shaped()).
   // (The edge: stateful_errors' differences at this x, c.at_edge.)
-  std::string loose, edge;
+  std::string loose;
+  std::vector<std::string> edge;
   int determined_levels = 0;
   bool edge_loose = false;
   for (size_t k = 0; k < ns; ++k) {
     if (!level[k] || c.shape_values[k] == 0) continue;
     const bool at_edge = k < c.at_edge.size() && c.at_edge[k];
-    if (at_edge) edge += std::string(edge.empty() ? "" : ", ") + c.shape[k]->key, edge_loose = edge_loose || !determined(k);
+    if (at_edge) edge.push_back(c.shape[k]->key), edge_loose = edge_loose || !determined(k);
     if (determined(k)) ++determined_levels;
     else if (!at_edge) loose += std::string(loose.empty() ? "" : ", ") + c.shape[k]->key;
   }
@@ -517,7 +518,7 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
   // tenth.
   bool shape_determined = false;
   for (size_t k = 0; k < ns; ++k) shape_determined = shape_determined || (!level[k] && determined(k));
-  std::string at_end = edge_loose && shape_determined ? std::string() : edge;
+  std::vector<std::string> at_end = edge_loose && shape_determined ? std::vector<std::string>() : edge;
   const StatefulSpace box = stateful_space(c);
   // Within the polish's tolerance (1e-4 in the logarithm) of an end, with a margin. (A margin
   // of 5 % rejected the true Stribeck speed of friction experiment 21, 0.966 of the top of its
@@ -535,16 +536,12 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
   bool shaped_inside = false;
   for (size_t k = 0; k < ns; ++k) shaped_inside = shaped_inside || (!level[k] && determined(k) && !at_an_end(k));
   for (size_t k = 0; k < ns; ++k)
-    if (!level[k] && at_an_end(k) && (determined(k) || !shaped_inside)) at_end += std::string(at_end.empty() ? "" : ", ") + c.shape[k]->key;
+    if (!level[k] && at_an_end(k) && (determined(k) || !shaped_inside)) at_end.push_back(c.shape[k]->key);
   if (!at_end.empty()) {
-    for (size_t k = 0; k < ns; ++k) {
-      const std::string& key = c.shape[k]->key;
-      if ((", " + at_end + ",").find(", " + key + ",") != std::string::npos &&
-          std::find(c.not_identifiable.begin(), c.not_identifiable.end(), key) == c.not_identifiable.end())
-        c.not_identifiable.push_back(key);
-    }
+    for (const auto& key : at_end)
+      if (std::find(c.not_identifiable.begin(), c.not_identifiable.end(), key) == c.not_identifiable.end()) c.not_identifiable.push_back(key);
     c.break_away_loose = true;
-    c.at_range_end = at_end;
+    c.at_range_end = comma_list(at_end);
   }
   PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
   c.fit_cols = simulated_columns(inst, fit_);
@@ -719,8 +716,7 @@ double Diagnosis::stateful_gain(const Candidate& c) const { return shaped(c) ? o
 // `stribeck` and left no trace of the LuGre fit on the joint).
 void Diagnosis::note_lost(int k, double bar, double rss, double gain) {
   Candidate& c = cands_[static_cast<size_t>(k)];
-  std::string loose;
-  for (const auto& key : c.not_identifiable) loose += (loose.empty() ? "" : ", ") + key;
+  const std::string loose = comma_list(c.not_identifiable);
   c.lost_to_static = "fitted by simulation, but held out it does not beat the static frictions on its joint (residual sum of squares " +
                      fmt(rss) + " against their " + fmt(bar) + "; it needs " + fmt(100 * gain, 2) + " % less)" +
                      (loose.empty() ? std::string() : "; keys the data do not determine: " + loose);
@@ -807,9 +803,7 @@ int Diagnosis::stateful_rival(int accepted, const std::vector<int>& order, const
       continue;
     }
     std::vector<int> all_rivals = rivals, beside;   // with the chosen static frictions it would replace; those it would join beside
-    for (int q : chosen)
-      if (nests(k, q)) all_rivals.push_back(q);
-      else if (cands_[static_cast<size_t>(q)].joint == c.joint) beside.push_back(q);
+    chosen_around(k, chosen, all_rivals, beside);
     if (c.break_away_loose && !rolls_out_better(k, all_rivals, beside)) continue;
     best = rss;
     out = k;
