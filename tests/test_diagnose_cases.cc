@@ -701,6 +701,29 @@ const std::string kReviewArm = R"(<mujoco model="rev_arm">
 const std::string kReviewArmImport =
     "--t t --x 'q:yaw,q:shoulder,q:elbow' --y 'tau:yaw,tau:shoulder,tau:elbow' --lowpass 10 --derive --drop-edges 612 --decimate 5";
 
+// A sixth review's 3-hinge arm (its own masses, damping and armature), imported as kReviewArm's.
+const std::string kReviewArm6 = R"(<mujoco model="review_arm6">
+  <compiler angle="radian" inertiafromgeom="false"/>
+  <option timestep="0.001" gravity="0 0 -9.81">
+    <flag contact="disable"/>
+  </option>
+  <worldbody>
+    <body name="base_link" pos="0 0 0.2">
+      <joint name="yaw" type="hinge" axis="0 0 1" damping="0.35" armature="0.02"/>
+      <inertial pos="0.01 0 0.05" mass="2.3" diaginertia="0.012 0.011 0.006"/>
+      <body name="upper" pos="0 0 0.1">
+        <joint name="shoulder" type="hinge" axis="0 1 0" damping="0.6" armature="0.015"/>
+        <inertial pos="0.14 0 0.005" mass="1.7" diaginertia="0.004 0.015 0.014"/>
+        <body name="fore" pos="0.3 0 0">
+          <joint name="elbow" type="hinge" axis="0 1 0" damping="0.25" armature="0.008"/>
+          <inertial pos="0.11 0.004 0" mass="0.85" diaginertia="0.0015 0.0062 0.0058"/>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+)";
+
 // A review's 3-hinge arm with LuGre friction on its elbow (fc 0.1, fs 0.2, vs 0.03; 1 %, 18 bit,
 // the 10 Hz import): `coulomb` is named (0.227 % held out), then `stribeck` supersedes it and
 // is rejected once fitted with the written parameters (fs < fc). The Coulomb friction it had
@@ -777,36 +800,14 @@ TEST(DiagnoseCases, AHiddenCoulombFrictionThatSticksIsNotStickSlip) {
   EXPECT_TRUE(noted) << r["not_tried"].dump(1);
 }
 
-// A sixth review's 3-hinge arm (its own masses, damping and armature) with LuGre on its yaw
-// joint (fc 0.06, fs 0.1, vs 0.05; 1 %, 17 bit, the 10 Hz import): `stick_slip` on yaw, and
-// the written model's rollouts end a little farther than the given model's on the elbow,
-// which has no cause - moved through the coupling. The note said "the causes on those joints
-// are not confirmed in simulation" of a joint with none; it now says that no cause is named
-// there.
+// The sixth review's arm with LuGre on its yaw joint (fc 0.06, fs 0.1, vs 0.05; 1 %, 17 bit,
+// the 10 Hz import): `stick_slip` on yaw, and the written model's rollouts end a little
+// farther than the given model's on the elbow, which has no cause - moved through the
+// coupling. The note said "the causes on those joints are not confirmed in simulation" of a
+// joint with none; it now says that no cause is named there.
 TEST(DiagnoseCases, ARolloutNoteNamesNoCauseOnAJointWithoutOne) {
   const auto dir = test::temp_dir("dc-rollout-note");
-  const std::string arm = R"(<mujoco model="review_arm6">
-  <compiler angle="radian" inertiafromgeom="false"/>
-  <option timestep="0.001" gravity="0 0 -9.81">
-    <flag contact="disable"/>
-  </option>
-  <worldbody>
-    <body name="base_link" pos="0 0 0.2">
-      <joint name="yaw" type="hinge" axis="0 0 1" damping="0.35" armature="0.02"/>
-      <inertial pos="0.01 0 0.05" mass="2.3" diaginertia="0.012 0.011 0.006"/>
-      <body name="upper" pos="0 0 0.1">
-        <joint name="shoulder" type="hinge" axis="0 1 0" damping="0.6" armature="0.015"/>
-        <inertial pos="0.14 0 0.005" mass="1.7" diaginertia="0.004 0.015 0.014"/>
-        <body name="fore" pos="0.3 0 0">
-          <joint name="elbow" type="hinge" axis="0 1 0" damping="0.25" armature="0.008"/>
-          <inertial pos="0.11 0.004 0" mass="0.85" diaginertia="0.0015 0.0062 0.0058"/>
-        </body>
-      </body>
-    </body>
-  </worldbody>
-</mujoco>
-)";
-  const auto r = diagnose_user_log(dir, arm, "type=stick_slip joints=yaw fc=0.06 fs=0.10 vs=0.05 sigma0=30 sigma1=2 sigma2=0",
+  const auto r = diagnose_user_log(dir, kReviewArm6, "type=stick_slip joints=yaw fc=0.06 fs=0.10 vs=0.05 sigma0=30 sigma1=2 sigma2=0",
                                    "--seed 21 --duration 25 --torque-noise 0.01 --encoder-bits 17", kReviewArmImport, 20);
   std::set<std::string> with_cause;
   for (const auto& c : r["causes"])
@@ -823,6 +824,38 @@ TEST(DiagnoseCases, ARolloutNoteNamesNoCauseOnAJointWithoutOne) {
         EXPECT_EQ(note.find("\"" + w.get<std::string>() + "\""), std::string::npos) << note;
       }
     }
+  }
+}
+
+// The sixth review's arm with LuGre whose hump the 10 Hz import smears (fs 1.5-2 fc; 1.5 %, 17
+// bit). On the yaw joint (fc 0.08, fs 0.12, vs 0.08, sigma0 40, sigma1 2) the bristles' basin is a
+// ridge half a decade wide in sigma1 along sigma0, which a grid of 5 per key missed: the fit
+// settled on stiff bristles (a drop of 7.13 where the truth gives 7.79), lost to `stribeck`
+// held out (0.38 %, the true model 0.225 %). On the elbow (fc 0.06, fs 0.12, vs 0.05, sigma0
+// 30, sigma1 1.5) the fit had fc right to 1 % and fs loose, and was refused as "levels (fs) not
+// determined": `coulomb` at 0.346 % (the true model 0.206 %). A loose break-away above a
+// determined Coulomb level is reported not identifiable, not refused.
+TEST(DiagnoseCases, LuGreWhoseHumpTheImportSmearsIsStickSlip) {
+  struct Draw {
+    const char* joint;
+    const char* hidden;
+    int seed;
+    double fc;
+  };
+  for (const Draw& d : {Draw{"yaw", "type=stick_slip joints=yaw fc=0.08 fs=0.12 vs=0.08 sigma0=40 sigma1=2 sigma2=0", 27, 0.08},
+                        Draw{"elbow", "type=stick_slip joints=elbow fc=0.06 fs=0.12 vs=0.05 sigma0=30 sigma1=1.5 sigma2=0", 32, 0.06}}) {
+    SCOPED_TRACE(d.hidden);
+    const auto dir = test::temp_dir(std::string("dc-smeared-") + d.joint);
+    const auto r = diagnose_user_log(dir, kReviewArm6, d.hidden, "--seed " + std::to_string(d.seed) + " --duration 25 --torque-noise 0.015 --encoder-bits 17",
+                                     kReviewArmImport, 20);
+    EXPECT_EQ(written_causes(r), std::vector<std::string>{"stick_slip"}) << r["causes"].dump(1) << r["not_tried"].dump(1);
+    for (const auto& c : r["causes"])
+      if (c["effect"] == "stick_slip") {
+        EXPECT_EQ(c["joints"][0], d.joint);
+        EXPECT_NEAR(c["params"]["fc"].get<double>(), d.fc, 0.2 * d.fc) << c.dump();
+        const auto& free = c["not_identifiable"];
+        EXPECT_EQ(std::find(free.begin(), free.end(), "fc"), free.end()) << free.dump();
+      }
   }
 }
 

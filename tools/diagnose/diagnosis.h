@@ -336,7 +336,7 @@ class Diagnosis {
   double scan_shape_keys(const Candidate& c, const Fit& current, const std::vector<bool>& level, const std::vector<double>& lb,
                          const std::vector<double>& ub, std::vector<double>& x) const;
   void polish_stateful(const Candidate& c, const Fit& current, const std::vector<double>& lb, const std::vector<double>& ub,
-                       std::vector<double>& x, int fixed = -1, int evals_per_key = 0) const;   // 0: the full polish
+                       std::vector<double>& x, const std::vector<bool>& held = {}, int evals_per_key = 0) const;   // 0: the full polish
   std::vector<std::string> profile_stateful(const Candidate& c, const Fit& current, const std::vector<bool>& level,
                                             const std::vector<double>& lb, const std::vector<double>& ub, const std::vector<double>& x) const;
   std::vector<double> grid_start(const Candidate& c, const Fit& current, const std::vector<bool>& level, const std::vector<double>& lb,

@@ -292,20 +292,22 @@ void Diagnosis::fit_stateful(Candidate& c, const Fit& current) {
   settle_levels(c, current, level, x);
 }
 
-// The best point of a coarse grid over the keys that are not levels (5 per key, cell centres
+// The best point of a coarse grid over the keys that are not levels (7 per key, cell centres
 // of their log ranges; the levels held at x's; empty when there are none or too many), a
 // further start of the polish: from the scanned and the static starts alone two LuGre draws
 // (DiagnoseBeyond.LuGreOfSmallBreakAwayIsNotCoulomb) ended where their levels were not
-// determined, and `coulomb` was named.
+// determined, and `coulomb` was named. (At 5 per key two LuGre logs of a review missed the
+// bristles' basin, a ridge half a decade wide in sigma1 along sigma0, and the polish settled
+// on the plateau of stiff bristles, a drop of 7.13 and 6.06 where the truth gives 7.79 and 7.26.)
 std::vector<double> Diagnosis::grid_start(const Candidate& c, const Fit& current, const std::vector<bool>& level,
                                           const std::vector<double>& lb, const std::vector<double>& ub, const std::vector<double>& x) const {
-  constexpr int kPerKey = 5;
+  constexpr int kPerKey = 7;
   std::vector<size_t> keys;
   for (size_t k = 0; k < x.size(); ++k)
     if (!level[k]) keys.push_back(k);
   size_t total = 1;
   for (size_t i = 0; i < keys.size(); ++i) total *= kPerKey;
-  if (keys.empty() || total > 625) return {};
+  if (keys.empty() || total > 2401) return {};
   std::vector<double> best;
   double best_drop = -std::numeric_limits<double>::infinity();
   for (size_t idx = 0; idx < total; ++idx) {
@@ -322,15 +324,15 @@ std::vector<double> Diagnosis::grid_start(const Candidate& c, const Fit& current
 
 // Subplex on the drop, from x, one pass (restarts from its own end point, which 80 evaluations
 // per key had needed, left the LuGre draws' optimum unchanged at 400 per key).
-// `fixed` (an index, or -1): a key held at its value in x (the profile's); `evals_per_key` 0:
-// kPolishEvalsPerKey.
+// `held` (empty, or one flag per key): keys held at their values in x (the profile's);
+// `evals_per_key` 0: kPolishEvalsPerKey.
 void Diagnosis::polish_stateful(const Candidate& c, const Fit& current, const std::vector<double>& lb, const std::vector<double>& ub,
-                                std::vector<double>& x, int fixed, int evals_per_key) const {
-  // The free keys: x without the fixed one.
+                                std::vector<double>& x, const std::vector<bool>& held, int evals_per_key) const {
+  // The free keys: x without the held ones.
   if (evals_per_key <= 0) evals_per_key = kPolishEvalsPerKey;
   std::vector<size_t> free;
   for (size_t k = 0; k < x.size(); ++k)
-    if (static_cast<int>(k) != fixed) free.push_back(k);
+    if (held.empty() || !held[k]) free.push_back(k);
   struct Ctx {
     const Diagnosis* self;
     const Candidate* c;
@@ -384,6 +386,12 @@ std::vector<std::string> Diagnosis::profile_stateful(const Candidate& c, const F
                                                      const std::vector<double>& lb, const std::vector<double>& ub,
                                                      const std::vector<double>& x) const {
   const size_t ns = x.size();
+  // A level the fit declares 0 (settle_levels: the data do not need it, LuGre's sigma2 beside
+  // the MJCF's damping) is not part of the effect: held at its floor, not profiled. (Free, its
+  // two points and its place in every polish cost a quarter of the profile: 3.5 s against 2.6
+  // on the delayed LuGre benchmark's joint, profiled on both sides of the delay.)
+  std::vector<bool> declared_zero(ns, false);
+  for (size_t k = 0; k < ns; ++k) declared_zero[k] = level[k] && k < c.shape_values.size() && c.shape_values[k] == 0;
   std::vector<std::vector<double>> points;
   auto add = [&](size_t k, double value) {
     if (value < lb[k] || value > ub[k]) return;
@@ -397,10 +405,13 @@ std::vector<std::string> Diagnosis::profile_stateful(const Candidate& c, const F
     std::vector<bool> held = level;
     held[k] = true;
     scan_shape_keys(c, current, held, lb, ub, p);
-    polish_stateful(c, current, lb, ub, p, static_cast<int>(k), kProfileEvalsPerKey);
+    std::vector<bool> fixed = declared_zero;
+    fixed[k] = true;
+    polish_stateful(c, current, lb, ub, p, fixed, kProfileEvalsPerKey);
     points.push_back(std::move(p));
   };
   for (size_t k = 0; k < ns; ++k) {
+    if (declared_zero[k]) continue;
     for (double f : {1 - kNotIdentifiable, 1 + kNotIdentifiable}) add(k, x[k] + std::log(f));
     if (level[k]) continue;
     const double cell = (ub[k] - lb[k]) / kProfileCells;
@@ -480,6 +491,18 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
   // break-away, had `coulomb` named where the stateful fit explained what Coulomb left). It is
   // reported not identifiable, and the fit held to the higher bar of an unshaped one (shaped()).
   // (The edge: stateful_errors' differences at this x, c.at_edge.)
+  // A loose break-away is not such a level: a level whose edge is a determined principal one
+  // (LuGre's fs >= fc) with its gap above it loose is the hump the data do not show. It stays
+  // in not_identifiable (stateful_errors put it there), and the fit is held to what a fit of
+  // a loose gap meets: the unshaped bar held out (shaped()), and the rollout test where the
+  // gap is small (profile_once). (Refused here, two LuGre logs of a review, fs 1.5-2 fc with a
+  // Stribeck speed the 10 Hz import smears, had `stribeck` and `coulomb` named at 0.38 and
+  // 0.35 % held out where the true LuGre models give 0.23 and 0.21 %: fc right to 1 %.)
+  const int principal = principal_level(c, level);
+  auto loose_break_away = [&](size_t k) {
+    return principal >= 0 && static_cast<int>(k) != principal && determined(static_cast<size_t>(principal)) &&
+           gap_loose(c, k, static_cast<size_t>(principal));
+  };
   std::string loose;
   std::vector<std::string> edge;
   int determined_levels = 0;
@@ -489,7 +512,7 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
     const bool at_edge = k < c.at_edge.size() && c.at_edge[k];
     if (at_edge) edge.push_back(c.shape[k]->key), edge_loose = edge_loose || !determined(k);
     if (determined(k)) ++determined_levels;
-    else if (!at_edge) loose += std::string(loose.empty() ? "" : ", ") + c.shape[k]->key;
+    else if (!at_edge && !loose_break_away(k)) loose += std::string(loose.empty() ? "" : ", ") + c.shape[k]->key;
   }
   if (determined_levels == 0 || !loose.empty()) {
     refuse("levels (" + (loose.empty() ? std::string("all") : loose) + ") are not determined by the data: not this effect");
@@ -789,10 +812,14 @@ int Diagnosis::stateful_rival(int accepted, const std::vector<int>& order, const
     if (!refused(k, f.coef.tail(c.fit_cols.cols)).empty() || !evidence_holds(k, before, f)) continue;
     Eigen::VectorXd rt = residual_on(test_, trial, true, f);
     const double rss = rss_on(rt, outs, test_.N);
-    if (!gains_on_test(best, rss, opt_.min_gain, rss_floor(test_.b))) {
-      note_lost(k, best, rss, opt_.min_gain);
+    if (!beats_static(c, best, rss)) {   // the bar as the fit stands: the profile can only raise it (shaped())
+      note_lost(k, best, rss, stateful_gain(c));
       continue;
     }
+    std::vector<int> all_rivals = rivals, beside;   // with the chosen static frictions it would replace; those it would join beside
+    chosen_around(k, chosen, all_rivals, beside);
+    const bool rolled = c.break_away_loose;   // known before the profile: the rollouts first (forward_backward)
+    if (rolled && !rolls_out_better(k, all_rivals, beside)) continue;
     profile_once(k, before);
     if (!c.refusal.empty()) {
       refuse_profiled(k);
@@ -802,9 +829,7 @@ int Diagnosis::stateful_rival(int accepted, const std::vector<int>& order, const
       note_lost(k, best, rss, stateful_gain(c));
       continue;
     }
-    std::vector<int> all_rivals = rivals, beside;   // with the chosen static frictions it would replace; those it would join beside
-    chosen_around(k, chosen, all_rivals, beside);
-    if (c.break_away_loose && !rolls_out_better(k, all_rivals, beside)) continue;
+    if (c.break_away_loose && !rolled && !rolls_out_better(k, all_rivals, beside)) continue;
     best = rss;
     out = k;
     next = std::move(f);
