@@ -12,6 +12,7 @@
 
 #include "diagnose_draws.h"
 #include "diagnosis.h"
+#include "report.h"
 #include "statistics.h"
 #include "spml/envs/mjcf_edit.h"
 #include "spml/diagnose.h"
@@ -1020,4 +1021,25 @@ TEST(DiagnoseStatistics, TheFamilywiseBarKeepsTheFamilysFalseAlarmRate) {
     EXPECT_NEAR(1 - std::pow(1 - std::erfc(z / std::sqrt(2.0)), k), alpha, 1e-12) << k;
   }
   EXPECT_NEAR(spml::diagnose_detail::familywise_z(alpha, 22), 3.840, 5e-4);   // the random chains' rank
+}
+
+// A cause no single later one holds is `superseded_by: "redundant"` in report.json; the
+// terminal and report.md printed "superseded by redundant", which a review read as an effect
+// of that name (a LuGre fit on a fresh log). They say it in words; a cause superseded by a
+// named effect still names it.
+TEST(DiagnoseCases, ARedundantCauseIsSaidInWords) {
+  const nlohmann::json errors = {{"rmse_test", {{"j", 0.1}}}, {"rel_error_test", {{"j", 0.01}}}, {"rel_error_test_all", 0.01}};
+  nlohmann::json r = {{"model", "m.xml"}, {"data", "d.h5"}, {"fit_split", "train"}, {"test_split", "test"}, {"rows", {{"fit", 10}, {"test", 5}}},
+                      {"joints", {"j"}}, {"baseline", errors}, {"final", errors}, {"not_tried", nlohmann::json::array()},
+                      {"not_identifiable", nlohmann::json::array()}, {"notes", nlohmann::json::array()}};
+  auto cause = [](const std::string& effect, const std::string& by) {
+    return nlohmann::json{{"effect", effect}, {"joints", {"j"}}, {"delta_bic", 100.0}, {"rel_error_test_after_all", 0.01},
+                          {"params", {{"j.fc", 0.1}}}, {"stderr", {{"j.fc", 0.01}}}, {"superseded_by", by}};
+  };
+  r["causes"] = {cause("stick_slip", "redundant"), cause("coulomb", "stribeck")};
+  for (const std::string& text : {spml::diagnose_detail::report_summary(r), spml::diagnose_detail::report_markdown(r, false)}) {
+    EXPECT_EQ(text.find("superseded by redundant"), std::string::npos) << text;
+    EXPECT_NE(text.find("not needed beside the other causes"), std::string::npos) << text;
+    EXPECT_NE(text.find("superseded by stribeck"), std::string::npos) << text;
+  }
 }

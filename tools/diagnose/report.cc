@@ -21,6 +21,14 @@ std::string pct(double v) { return num(100 * v, 3) + " %"; }
 // of equally good fits: LuGre's fs and vs on a log without break-away were printed with one); a
 // value that extended.xml states otherwise (refitted with the parameters it writes) is shown
 // beside it, and a joint term of `parameters` rejected on its joint says so.
+// A superseded cause: by the later effect named, or, where no single later one holds it,
+// "redundant" in report.json - said in words here ("superseded by redundant" read as if an
+// effect of that name had replaced it).
+std::string superseded_text(const nlohmann::json& c) {
+  const std::string by = c["superseded_by"].get<std::string>();
+  return by == "redundant" ? "dropped: not needed beside the other causes" : "superseded by " + by;
+}
+
 std::string params_text(const nlohmann::json& c, const std::string& sep) {
   std::string out;
   const nlohmann::json loose = c.value("not_identifiable", nlohmann::json::array());
@@ -71,7 +79,7 @@ std::string report_summary(const nlohmann::json& r) {
     else if (r.contains("statistics") && r["statistics"].contains("parameters_z"))   // the family-wise bar (selection.cc)
       s << " (" << c["params"].size() << " beyond " << num(r["statistics"]["parameters_z"].get<double>(), 3) << " standard errors)";
     s << "  (dBIC " << num(c["delta_bic"].get<double>(), 5) << ", test error after " << pct(c["rel_error_test_after_all"].get<double>()) << ")";
-    if (c.contains("superseded_by")) s << "  superseded by " << c["superseded_by"].get<std::string>();
+    if (c.contains("superseded_by")) s << "  " << superseded_text(c);
     if (c.contains("rejected")) s << "  REJECTED: " << c["rejected"].value("summary", "in simulation, rollouts worse with it");
     s << "\n";
   }
@@ -129,7 +137,7 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
     for (const auto& j : c["joints"]) joints += (joints.empty() ? "" : ", ") + j.get<std::string>();
     s << " on " << joints << " - ΔBIC " << num(c["delta_bic"].get<double>(), 5) << ", test error after "
       << pct(c["rel_error_test_after_all"].get<double>());
-    if (c.contains("superseded_by")) s << " (superseded by " << c["superseded_by"].get<std::string>() << ")";
+    if (c.contains("superseded_by")) s << " (" << superseded_text(c) << ")";
     if (c.contains("rejected")) s << " - **rejected, not in extended.xml**: " << c["rejected"].value("reason", "");
     s << "\n   - " << params_text(c, "\n   - ") << "\n";
     if (c.value("written_as", "") == "mjcf") {   // a spring or viscous friction in MuJoCo's own terms (written_form.cc)
