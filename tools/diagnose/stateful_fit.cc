@@ -498,8 +498,9 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
   // gap is small (profile_once). (Refused here, two LuGre logs of a review, fs 1.5-2 fc with a
   // Stribeck speed the 10 Hz import smears, had `stribeck` and `coulomb` named at 0.38 and
   // 0.35 % held out where the true LuGre models give 0.23 and 0.21 %: fc right to 1 %.)
-  const int principal = principal_level(c, level);
+  int principal = -2;   // found when a level is loose (its derivatives cost simulations)
   auto loose_break_away = [&](size_t k) {
+    if (principal == -2) principal = principal_level(c, level);
     return principal >= 0 && static_cast<int>(k) != principal && determined(static_cast<size_t>(principal)) &&
            gap_loose(c, k, static_cast<size_t>(principal));
   };
