@@ -162,9 +162,6 @@ bool Diagnosis::confirm_in_simulation(const std::string& ext_path, MjcfEdits& ed
   return rejected_any;
 }
 
-}  // namespace spml::diagnose_detail
-
-namespace spml::diagnose_detail {
 namespace {
 
 bool is_diagnosed(const std::pair<std::string, std::string>& text) { return text.first.rfind(kDiagnosedPrefix, 0) == 0; }
@@ -342,9 +339,6 @@ bool Diagnosis::guard_held_out(const std::string& ext_path, MjcfEdits& edits, st
   return true;
 }
 
-}  // namespace spml::diagnose_detail
-
-namespace spml::diagnose_detail {
 
 // The declarations of `causes` fitted together against the model as given (`f`: refit(causes,
 // false)): a static friction with its fitted parameters, a stateful one with its keys at the

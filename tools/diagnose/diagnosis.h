@@ -20,6 +20,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <deque>
@@ -103,6 +104,13 @@ struct Candidate {
   bool break_away_loose = false;              // joins only by rolling out closer (rolls_out_better): a small loose gap of a level (profile_once), a key at an end (settle_levels)
   std::string at_range_end;                   // settle_levels: the keys at an end of their range or at the plugin's edge
   std::string lost_to_static;                 // the last held-out comparison it lost to the static frictions (note_lost), for not_tried
+
+  // Is key (of shape key k) in not_identifiable; put it there once.
+  bool loose(const std::string& key) const { return std::find(not_identifiable.begin(), not_identifiable.end(), key) != not_identifiable.end(); }
+  bool loose(size_t k) const { return loose(shape[k]->key); }
+  void mark_loose(const std::string& key) {
+    if (!loose(key)) not_identifiable.push_back(key);
+  }
 };
 
 bool is_stateful(const spml_force_plugin& p);   // #22: advance/reset and no regressor
@@ -355,6 +363,7 @@ class Diagnosis {
   double stateful_gain(const Candidate& c) const;   // the held-out gain beats_static asks of it
   void note_lost(int k, double bar, double rss, double gain);
   void refuse_profiled(int k);
+  bool stateful_joins(int k, const Fit& current, double bar, double rss, const std::vector<int>& rivals, const std::vector<int>& beside);
   Declarations declared(const std::vector<int>& causes, const Fit& f) const;
   bool holds_level_friction(const Candidate& c) const;
   std::pair<Eigen::Index, Eigen::Index> level_friction_columns(const Candidate& c) const;

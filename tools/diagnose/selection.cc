@@ -227,32 +227,12 @@ void Diagnosis::forward_backward() {
       if (const Candidate& c = cands_[static_cast<size_t>(order[i])]; c.stateful) {
         // #22: only beyond the static frictions on its joint, held out (stateful_fit.cc)
         // A static friction it nests that is already chosen (Coulomb) is in the bar too: it is the current fit.
-        const bool replaces = in_place(order[i], chosen).size() <= chosen.size();
         std::vector<int> rivals, beside;   // the static frictions on its joint: those chosen that it nests, and those that would join; the chosen it would join beside
         chosen_around(order[i], chosen, rivals, beside);
+        const bool replaces = !rivals.empty();   // it nests a chosen cause
         const double bar = static_bar(c.joint, order, chosen, current, outs,
                                       replaces ? rss_on(r_test, outs, test_.N) : std::numeric_limits<double>::infinity(), -1, &rivals);
-        // The bar as the fit stands, before the costly profile, which can only raise it (a
-        // key it finds loose can only make the fit unshaped: shaped()).
-        if (std::isfinite(bar) && !beats_static(c, bar, rss)) {
-          note_lost(order[i], bar, rss, stateful_gain(c));
-          continue;
-        }
-        // A break-away known to be loose before the profile (settle_levels: a key at an end,
-        // levels at the edge) meets the rollout test first: 60 short rollouts cost less than
-        // the profile's polishes (2.6 s on the delayed LuGre benchmark's joint).
-        const bool rolled = c.break_away_loose;
-        if (rolled && !rolls_out_better(order[i], rivals, beside)) continue;
-        profile_once(order[i], current);
-        if (!c.refusal.empty()) {   // not this effect (profile_once)
-          refuse_profiled(order[i]);
-          continue;
-        }
-        if (std::isfinite(bar) && !beats_static(c, bar, rss)) {
-          note_lost(order[i], bar, rss, stateful_gain(c));
-          continue;
-        }
-        if (c.break_away_loose && !rolled && !rolls_out_better(order[i], rivals, beside)) continue;
+        if (!stateful_joins(order[i], current, bar, rss, rivals, beside)) continue;
       }
       accepted = order[i];
       next = std::move(f);

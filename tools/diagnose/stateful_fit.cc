@@ -562,8 +562,7 @@ void Diagnosis::settle_levels(Candidate& c, const Fit& current, const std::vecto
   for (size_t k = 0; k < ns; ++k)
     if (!level[k] && at_an_end(k) && (determined(k) || !shaped_inside)) at_end.push_back(c.shape[k]->key);
   if (!at_end.empty()) {
-    for (const auto& key : at_end)
-      if (std::find(c.not_identifiable.begin(), c.not_identifiable.end(), key) == c.not_identifiable.end()) c.not_identifiable.push_back(key);
+    for (const auto& key : at_end) c.mark_loose(key);
     c.break_away_loose = true;
     c.at_range_end = comma_list(at_end);
   }
@@ -645,12 +644,8 @@ void Diagnosis::profile_once(int k, const Fit& current) {
   std::vector<double> x(c.shape.size());
   for (size_t k2 = 0; k2 < x.size(); ++k2)
     x[k2] = std::clamp(std::log(std::max(c.shape_values[k2], 1e-300)), lb[k2], ub[k2]);   // a level declared 0 sits at its floor
-  auto say_loose = [&](const std::string& key) {
-    if (std::find(c.not_identifiable.begin(), c.not_identifiable.end(), key) == c.not_identifiable.end()) c.not_identifiable.push_back(key);
-  };
-  for (const auto& key : profile_stateful(c, current, level, lb, ub, x)) say_loose(key);
-  auto loose = [&](size_t k2) { return std::find(c.not_identifiable.begin(), c.not_identifiable.end(), c.shape[k2]->key) != c.not_identifiable.end(); };
-  auto loose_off_edge = [&](size_t k2) { return loose(k2) && !(k2 < c.at_edge.size() && c.at_edge[k2]); };
+  for (const auto& key : profile_stateful(c, current, level, lb, ub, x)) c.mark_loose(key);
+  auto loose_off_edge = [&](size_t k2) { return c.loose(k2) && !(k2 < c.at_edge.size() && c.at_edge[k2]); };
   // Speed keys (a Stribeck speed) shape a feature the joint crosses at each reversal in
   // 2 v / |qdd|. Crossed in less than a quarter period of the parallel filter's cut-off, the
   // feature is smeared by the filter, and the data hold its area rather than its height and
@@ -663,8 +658,8 @@ void Diagnosis::profile_once(int k, const Fit& current) {
   bool speed_loose = false;
   for (size_t k2 = 0; k2 < c.shape.size(); ++k2) {
     if (level[k2] || c.shape[k2]->domain != SPML_SHAPE_SPEED) continue;
-    if (unresolved_speed(c.joint, c.shape_values[k2])) say_loose(c.shape[k2]->key);
-    speed_loose = speed_loose || loose(k2);
+    if (unresolved_speed(c.joint, c.shape_values[k2])) c.mark_loose(c.shape[k2]->key);
+    speed_loose = speed_loose || c.loose(k2);
   }
   // A level whose edge is the principal one (LuGre's fs >= fc) shapes the effect by its gap
   // above it (the Stribeck hump), and so does its standard error: a gap it leaves loose is no
@@ -682,7 +677,7 @@ void Diagnosis::profile_once(int k, const Fit& current) {
     if (!level[k2] || !(c.shape_values[k2] > 0) || static_cast<int>(k2) == principal || principal < 0) continue;
     const auto p = static_cast<size_t>(principal);
     if (!gap_loose(c, k2, p)) continue;
-    say_loose(c.shape[k2]->key);
+    c.mark_loose(c.shape[k2]->key);
     c.break_away_loose = c.break_away_loose || c.shape_values[k2] - c.shape_values[p] < kLeastGap * c.shape_values[p];
   }
   const bool any_loose_level = [&] {
@@ -693,7 +688,7 @@ void Diagnosis::profile_once(int k, const Fit& current) {
   if (!speed_loose && !any_loose_level) return;
   if (speed_loose)
     for (size_t k2 = 0; k2 < level.size(); ++k2)
-      if (level[k2] && c.shape_values[k2] > 0 && static_cast<int>(k2) != principal) say_loose(c.shape[k2]->key);
+      if (level[k2] && c.shape_values[k2] > 0 && static_cast<int>(k2) != principal) c.mark_loose(c.shape[k2]->key);
   // The principal level must be determined by the profile too. settle_levels refuses a loose
   // level by its local standard error, before the profile runs; left loose here, a hidden
   // Coulomb friction of 1.06 N m on a friction experiment (slow band, delay_coulomb seed 200, 2
@@ -711,11 +706,10 @@ void Diagnosis::profile_once(int k, const Fit& current) {
 // import (delay_coulomb draws 8 and 10) fitted so with sigma1 35-72, a damping at the
 // reversals the low-pass rounds off, and beat Coulomb by the 2 % bar.
 bool Diagnosis::shaped(const Candidate& c) const {
-  auto loose = [&](size_t k) { return std::find(c.not_identifiable.begin(), c.not_identifiable.end(), c.shape[k]->key) != c.not_identifiable.end(); };
   bool shape = false;
   for (size_t k = 0; k < c.shape.size(); ++k) {
-    if (!is_level(c.shape[k])) shape = shape || !loose(k);
-    else if (k < c.shape_values.size() && c.shape_values[k] > 0 && loose(k)) return false;
+    if (!is_level(c.shape[k])) shape = shape || !c.loose(k);
+    else if (k < c.shape_values.size() && c.shape_values[k] > 0 && c.loose(k)) return false;
   }
   return shape;
 }
@@ -813,30 +807,42 @@ int Diagnosis::stateful_rival(int accepted, const std::vector<int>& order, const
     if (!refused(k, f.coef.tail(c.fit_cols.cols)).empty() || !evidence_holds(k, before, f)) continue;
     Eigen::VectorXd rt = residual_on(test_, trial, true, f);
     const double rss = rss_on(rt, outs, test_.N);
-    if (!beats_static(c, best, rss)) {   // the bar as the fit stands: the profile can only raise it (shaped())
-      note_lost(k, best, rss, stateful_gain(c));
-      continue;
-    }
     std::vector<int> all_rivals = rivals, beside;   // with the chosen static frictions it would replace; those it would join beside
     chosen_around(k, chosen, all_rivals, beside);
-    const bool rolled = c.break_away_loose;   // known before the profile: the rollouts first (forward_backward)
-    if (rolled && !rolls_out_better(k, all_rivals, beside)) continue;
-    profile_once(k, before);
-    if (!c.refusal.empty()) {
-      refuse_profiled(k);
-      continue;
-    }
-    if (!beats_static(c, best, rss)) {
-      note_lost(k, best, rss, stateful_gain(c));
-      continue;
-    }
-    if (c.break_away_loose && !rolled && !rolls_out_better(k, all_rivals, beside)) continue;
+    if (!stateful_joins(k, before, best, rss, all_rivals, beside)) continue;
     best = rss;
     out = k;
     next = std::move(f);
     next_test = std::move(rt);
   }
   return out;
+}
+
+// Does stateful candidate k, of held-out residual `rss`, join where the static frictions'
+// `bar` stands (infinite: none to beat): the forward step's and stateful_rival's checks, in
+// the order of their cost. The bar as the fit stands first - the profile can only raise it (a
+// key it finds loose can only make the fit unshaped: shaped()); a break-away known to be loose
+// before the profile (settle_levels: a key at an end, levels at the edge) meets the rollout
+// test next, 60 short rollouts costing less than the profile's polishes (2.6 s on the delayed
+// LuGre benchmark's joint); then the profile (against `current`), its refusal, the bar as the
+// profile leaves it, and the rollout test where the profile found the break-away loose.
+bool Diagnosis::stateful_joins(int k, const Fit& current, double bar, double rss, const std::vector<int>& rivals, const std::vector<int>& beside) {
+  Candidate& c = cands_[static_cast<size_t>(k)];
+  auto beaten = [&] {
+    if (!std::isfinite(bar) || beats_static(c, bar, rss)) return false;
+    note_lost(k, bar, rss, stateful_gain(c));
+    return true;
+  };
+  if (beaten()) return false;
+  const bool rolled = c.break_away_loose;
+  if (rolled && !rolls_out_better(k, rivals, beside)) return false;
+  profile_once(k, current);
+  if (!c.refusal.empty()) {   // not this effect
+    refuse_profiled(k);
+    return false;
+  }
+  if (beaten()) return false;
+  return !c.break_away_loose || rolled || rolls_out_better(k, rivals, beside);
 }
 
 // Gauss-Newton standard errors in the logarithms (differences of the projected force, one-sided
