@@ -153,6 +153,16 @@ std::string edit_mjcf(const std::string& model_path, const MjcfEdits& edits, std
     else
       notes.push_back("body '" + in.body + "' is not defined in " + model_path + " itself (unnamed or included?): its inertial is not written");
   }
+  for (const auto& [name, data] : edits.replaced_texts) {
+    XMLElement* found = nullptr;
+    for (XMLElement* custom = root->FirstChildElement("custom"); custom && !found; custom = custom->NextSiblingElement("custom"))
+      for (XMLElement* t = custom->FirstChildElement("text"); t && !found; t = t->NextSiblingElement("text"))
+        if (const char* v = t->Attribute("name"); v && name == v) found = t;
+    if (found)
+      found->SetAttribute("data", data.c_str());
+    else
+      notes.push_back("<custom><text name=\"" + name + "\"> is not in " + model_path + " itself (an included file?): its new data (" + data + ") is not written");
+  }
   if (!edits.texts.empty()) {
     XMLElement* custom = root->FirstChildElement("custom");
     if (!custom) custom = root->InsertEndChild(doc.NewElement("custom"))->ToElement();

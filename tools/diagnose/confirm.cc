@@ -237,7 +237,7 @@ bool Diagnosis::refit_written_effects(const std::string& ext_path, MjcfEdits& ed
                                     [&](const auto& t) { return is_diagnosed(t) && std::find(refitted.begin(), refitted.end(), t.second) != refitted.end(); }),
                      bare.texts.end());
     std::vector<std::string> ignored;
-    write_text_atomic(ext_path, write_model(bare, ignored));
+    write_text_atomic(ext_path, write_model(bare, ignored, &edits));   // the levels the refitted effects take over stay taken
     const MjcfRegressor ext(ext_path);
     const Eigen::VectorXd rest = fit_.b - written_prediction(ext, ext.base_parameters(), fit_);
     std::vector<const BlockColumns*> blocks;
@@ -332,7 +332,9 @@ bool Diagnosis::guard_held_out(const std::string& ext_path, MjcfEdits& edits, st
   }
   for (auto& c : R["causes"])
     if (!c.contains("superseded_by") && !c.contains("rejected")) c["rejected"] = record;
-  edits = MjcfEdits{{}, {}, {}, edits.comment};
+  MjcfEdits none;
+  none.comment = edits.comment;
+  edits = none;
   R["parameters_written"] = "none";
   written = write_scored(ext_path, edits, ignored);
   notes.push_back(why + " with its causes: none is written (causes[].rejected), extended.xml is the model as given");
@@ -396,7 +398,7 @@ bool Diagnosis::rolls_out_better(int k, const std::vector<int>& rivals, const st
     if (q >= 0) causes.push_back(q);   // q < 0: beside them alone
     if (!causes.empty()) e.texts = declared(causes, refit(causes, false));
     std::vector<std::string> ignored;
-    write_text_atomic(path.string(), edit_mjcf(opt_.model, e, ignored));
+    write_text_atomic(path.string(), edit_mjcf(opt_.model, with_take_over(e), ignored));
     const RolloutResult r = rollout(path.string(), test_.split, kWindows, opt_.rollout_seconds, test_.runs);
     const auto j = static_cast<size_t>(std::find(r.joints.begin(), r.joints.end(), c.joint_name) - r.joints.begin());
     Eigen::VectorXd out(static_cast<Eigen::Index>(r.window_error.size()));

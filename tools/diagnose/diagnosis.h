@@ -17,6 +17,7 @@
 //   delay.cc       an offset between torques and states, estimated and corrected first
 //   stateful_fit.cc  stateful plugins (LuGre stick_slip) fitted by simulation along the log
 //   unexplained.cc the GP (ARD) on the final residual: structure no candidate explains
+// own_friction.cc  the model's own friction level on a joint, taken over by a named friction
 #pragma once
 
 #include <Eigen/Core>
@@ -72,6 +73,8 @@ struct SplitData {
   // frictionloss torque - the regressor's fl*sign(qd), and the forces of declared plugins that
   // have no regressor columns (stateful or nonlinear: simulated along the split as declared).
   Eigen::VectorXd friction;
+  Eigen::VectorXd soft;        // MuJoCo's frictionloss beyond its ideal level (part of friction; empty: none)
+  Eigen::VectorXd own_level;   // the model's own friction levels per output, stacked (own_friction.cc; empty: none)
   Eigen::Index N = 0;
   std::vector<Section> sos;       // the parallel filter on this split's time base (empty: none)
   std::vector<Eigen::Index> runs; // first rows of the records after the first (several --data)
@@ -169,6 +172,16 @@ struct Cause {
   std::string superseded_by;
 };
 
+// The model's own dry-friction level on a joint (own_friction.cc): MuJoCo's frictionloss and
+// the declared plugin parameters whose force there is a pure level.
+struct OwnLevel {
+  double frictionloss = 0;
+  double declared = 0;                         // the plugin parameters' level together
+  std::vector<std::pair<size_t, int>> params;  // (declared instance, its parameter index)
+  std::vector<std::string> names;              // their standard parameter names (coulomb:j, plugin:...)
+  bool any() const { return frictionloss != 0 || declared != 0; }
+};
+
 // A selection's state (select() makes two and keeps one): the candidates as searched, the
 // causes chosen, what was not tried.
 struct Selection {
@@ -248,7 +261,7 @@ class Diagnosis {
   void load_cross();
   void map_outputs();
   void note_frictionloss();
-  Eigen::VectorXd frictionloss_correction(const SplitData& d) const;
+  Eigen::VectorXd frictionloss_correction(const SplitData& d, const mjModel* m) const;
   void add_declared_forces(const SplitData& d, Eigen::VectorXd& into) const;
   // prepare.cc
   SplitData prepare(const Split& s, const std::vector<Eigen::Index>& runs = {});
@@ -309,7 +322,8 @@ class Diagnosis {
   WrittenParameters consistent_parameters() const;
   // written_form.cc
   WrittenForm written_form(const MjcfEdits& edits) const;
-  std::string write_model(const MjcfEdits& edits, std::vector<std::string>& notes) const;
+  // `takers`: the edits whose causes take over their joints' own levels (own_friction.cc; default: edits)
+  std::string write_model(const MjcfEdits& edits, std::vector<std::string>& notes, const MjcfEdits* takers = nullptr) const;
   nlohmann::json report_written_form(const MjcfEdits& edits, std::vector<std::string>& notes);
   // confirm.cc
   bool confirm_in_simulation(const std::string& ext_path, MjcfEdits& edits);
@@ -363,7 +377,8 @@ class Diagnosis {
   double stateful_gain(const Candidate& c) const;   // the held-out gain beats_static asks of it
   void note_lost(int k, double bar, double rss, double gain);
   void refuse_profiled(int k);
-  bool stateful_joins(int k, const Fit& current, double bar, double rss, const std::vector<int>& rivals, const std::vector<int>& beside);
+  bool stateful_joins(int k, const Fit& current, const std::vector<int>& chosen, double bar, double rss, const std::vector<int>& rivals,
+                      const std::vector<int>& beside);
   Declarations declared(const std::vector<int>& causes, const Fit& f) const;
   bool holds_level_friction(const Candidate& c) const;
   std::pair<Eigen::Index, Eigen::Index> level_friction_columns(const Candidate& c) const;
@@ -378,6 +393,18 @@ class Diagnosis {
   void stateful_keys(const Candidate& c, nlohmann::json& params, nlohmann::json& se) const;
   void stateful_report(const Candidate& c, double amplitude, nlohmann::json& params, nlohmann::json& se, nlohmann::json& j) const;
   Eigen::VectorXd written_stateful(const SplitData& s, const mjModel* ext) const;
+  // own_friction.cc
+  void find_own_levels();
+  Eigen::VectorXd own_level_force(const SplitData& s, const Eigen::VectorXd& soft) const;
+  bool takes_over(int k) const;
+  std::vector<int> taken_over(const std::vector<int>& causes) const;
+  Eigen::VectorXd returned_levels(const SplitData& s, const std::vector<int>& causes) const;
+  bool own_level_parameter(int i, const std::vector<int>& joints) const;
+  bool taken_level(int i, const std::vector<int>& causes) const;
+  Fit level_held(int k, const Fit& current, const std::vector<int>& chosen) const;
+  MjcfEdits with_take_over(const MjcfEdits& e, const MjcfEdits* takers = nullptr) const;
+  nlohmann::json replaced_friction(int k) const;
+  std::vector<int> joint_ids(const std::vector<std::string>& names) const;
   // unexplained.cc (#22)
   nlohmann::json unexplained_joint(size_t o, const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test, std::ostringstream& csv) const;
   nlohmann::json unexplained(const std::string& out_dir, const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test) const;
@@ -406,6 +433,7 @@ class Diagnosis {
   std::vector<std::string> out_joints_;   // per output: joint name
   std::vector<int> out_joint_index_;      // per output: model joint index
   std::vector<bool> still_;               // per model joint
+  std::vector<OwnLevel> own_levels_;      // per model joint (own_friction.cc)
   std::vector<Candidate> cands_;
   nlohmann::json not_tried_ = nlohmann::json::array();
   std::vector<Cause> causes_;

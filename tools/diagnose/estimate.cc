@@ -12,13 +12,18 @@ std::vector<const BlockColumns*> Diagnosis::blocks(const std::vector<int>& cause
 }
 
 // robust: standard errors from the long-run covariance of the residuals (statistics.h).
+// Held at the MJCF's values, the base parameters are held without the own levels the causes
+// take over (own_friction.cc).
 Fit Diagnosis::refit(const std::vector<int>& causes, bool base_free, bool robust) const {
-  return fit_blocks(blocks(causes, base_free), fit_.y0, true, robust ? fit_.N : 0);
+  const Eigen::VectorXd returned = base_free ? Eigen::VectorXd() : returned_levels(fit_, causes);
+  return fit_blocks(blocks(causes, base_free), returned.size() ? Eigen::VectorXd(fit_.y0 + returned) : fit_.y0, true, robust ? fit_.N : 0);
 }
 
 // Residual of a fit on another split (test, cross): the causes' columns evaluated there.
 Eigen::VectorXd Diagnosis::residual_on(const SplitData& s, const std::vector<int>& causes, bool base_free, const Fit& f) const {
   Eigen::VectorXd pred = Eigen::VectorXd::Zero(s.y0.size());
+  if (!base_free)
+    if (const Eigen::VectorXd returned = returned_levels(s, causes); returned.size()) pred -= returned;
   Eigen::Index c = 0;
   if (base_free) {
     pred += s.base.times(f.coef.segment(0, s.base.cols));

@@ -28,6 +28,7 @@ void Diagnosis::load() {
     if (!in.plugin().regressor)
       notes_.push_back("plugin '" + in.decl.instance + "' (" + in.decl.type + ") has no regressor columns: its force is simulated along the data "
                        "as declared and belongs to the model as given (and to the written model's score)");
+  find_own_levels();
   // The model's own inverse dynamics against the regressor: what the regressor leaves out
   // (frictionloss, a stateful plugin, constraints) is said, per joint, before anything is named.
   for (const auto& mm : reg_->inverse_mismatches()) {
@@ -160,8 +161,7 @@ void Diagnosis::note_frictionloss() {
 // the friction rows of its constraint forces) minus the regressor's term, stacked like b. The
 // model as given then predicts what MuJoCo would, and the soft zone near zero speed is not
 // left in the residual for candidates to explain. Empty when the model has no frictionloss.
-Eigen::VectorXd Diagnosis::frictionloss_correction(const SplitData& s) const {
-  const mjModel* m = reg_->model();
+Eigen::VectorXd Diagnosis::frictionloss_correction(const SplitData& s, const mjModel* m) const {
   bool any = false;
   for (int v = 0; v < m->nv; ++v) any |= m->dof_frictionloss[v] != 0;
   if (!any) return {};

@@ -37,8 +37,10 @@ SplitData Diagnosis::prepare(const Split& s, const std::vector<Eigen::Index>& ru
     }
   }
   d.b = stacked_torques(s, opt_.data);
-  d.friction = frictionloss_correction(d);
+  d.soft = frictionloss_correction(d, reg_->model());
+  d.friction = d.soft;
   add_declared_forces(d, d.friction);
+  d.own_level = own_level_force(d, d.soft);
   d.given = d.base.times(base_.model_values);
   if (d.friction.size()) d.given += d.friction;
   const double rms_torque = rms(d.b);
@@ -81,6 +83,8 @@ void Diagnosis::apply_filter(SplitData& d) const {
     filter_stacked(d.sos, d.friction, d.N);
     d.given += d.friction;
   }
+  if (d.soft.size()) filter_stacked(d.sos, d.soft, d.N);
+  if (d.own_level.size()) filter_stacked(d.sos, d.own_level, d.N);
   d.y0 = d.b - d.given;
 }
 

@@ -55,8 +55,12 @@ void Diagnosis::score_candidates(const Fit& current, const std::vector<int>& cho
     if (c.skipped) continue;
     try {
       if (c.stateful && !c.searched) {   // #22: fitted once by simulation, against the residual before other causes on its joint
-        fit_stateful(c, current);
+        // Where it takes over the joint's own level, against the fit without it (own_friction.cc);
+        // its drop then counted from `current`.
+        const Fit held = level_held(static_cast<int>(k), current, chosen);
+        fit_stateful(c, held);
         if (c.skipped) continue;
+        c.gain.rss_drop -= held.rss - current.rss;
       }
       else if (!c.stateful && (!c.searched || (!c.shape.empty() && research.count(c.joint))))
         search_shape(c, current);
@@ -232,7 +236,7 @@ void Diagnosis::forward_backward() {
         const bool replaces = !rivals.empty();   // it nests a chosen cause
         const double bar = static_bar(c.joint, order, chosen, current, outs,
                                       replaces ? rss_on(r_test, outs, test_.N) : std::numeric_limits<double>::infinity(), -1, &rivals);
-        if (!stateful_joins(order[i], current, bar, rss, rivals, beside)) continue;
+        if (!stateful_joins(order[i], current, chosen, bar, rss, rivals, beside)) continue;
       }
       accepted = order[i];
       next = std::move(f);
@@ -417,6 +421,10 @@ void Diagnosis::decide_parameters() {
   };
   parameters_listed_.assign(static_cast<size_t>(base_.rank), false);
   for (int i = 0; i < base_.rank; ++i) parameters_listed_[static_cast<size_t>(i)] = contradicts(parameters_fit_, i, 1);
+  // A level a kept friction takes over is carried by it (own_friction.cc), not contradicted:
+  // refitted beside it, the level is what the cause leaves (0.03 for a declared 0.69 beside LuGre).
+  for (int i = 0; i < base_.rank; ++i)
+    if (parameters_listed_[static_cast<size_t>(i)] && taken_level(i, effects)) parameters_listed_[static_cast<size_t>(i)] = false;
   parameters_contradicted_ = static_cast<int>(std::count(parameters_listed_.begin(), parameters_listed_.end(), true));
   // The held-out gain under either noise model: one variance for every joint (the residual sum
   // of squares in N m^2) or one per joint (the geometric mean of each joint's sum relative to

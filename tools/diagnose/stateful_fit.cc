@@ -809,7 +809,7 @@ int Diagnosis::stateful_rival(int accepted, const std::vector<int>& order, const
     const double rss = rss_on(rt, outs, test_.N);
     std::vector<int> all_rivals = rivals, beside;   // with the chosen static frictions it would replace; those it would join beside
     chosen_around(k, chosen, all_rivals, beside);
-    if (!stateful_joins(k, before, best, rss, all_rivals, beside)) continue;
+    if (!stateful_joins(k, before, chosen, best, rss, all_rivals, beside)) continue;
     best = rss;
     out = k;
     next = std::move(f);
@@ -826,7 +826,8 @@ int Diagnosis::stateful_rival(int accepted, const std::vector<int>& order, const
 // test next, 60 short rollouts costing less than the profile's polishes (2.6 s on the delayed
 // LuGre benchmark's joint); then the profile (against `current`), its refusal, the bar as the
 // profile leaves it, and the rollout test where the profile found the break-away loose.
-bool Diagnosis::stateful_joins(int k, const Fit& current, double bar, double rss, const std::vector<int>& rivals, const std::vector<int>& beside) {
+bool Diagnosis::stateful_joins(int k, const Fit& current, const std::vector<int>& chosen, double bar, double rss, const std::vector<int>& rivals,
+                               const std::vector<int>& beside) {
   Candidate& c = cands_[static_cast<size_t>(k)];
   auto beaten = [&] {
     if (!std::isfinite(bar) || beats_static(c, bar, rss)) return false;
@@ -836,7 +837,7 @@ bool Diagnosis::stateful_joins(int k, const Fit& current, double bar, double rss
   if (beaten()) return false;
   const bool rolled = c.break_away_loose;
   if (rolled && !rolls_out_better(k, rivals, beside)) return false;
-  profile_once(k, current);
+  profile_once(k, level_held(k, current, chosen));
   if (!c.refusal.empty()) {   // not this effect
     refuse_profiled(k);
     return false;

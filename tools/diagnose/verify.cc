@@ -17,6 +17,17 @@ Eigen::VectorXd Diagnosis::written_prediction(const MjcfRegressor& ext, const Mj
   Eigen::VectorXd pred = stacked_base_regressor(ext, ebase, s.split.X, cols, s.name) * ebase.model_values;
   filter_stacked(s.sos, pred, s.N, s.runs);
   if (s.friction.size()) pred += s.friction;   // MuJoCo's frictionloss, as in `given` (load.cc)
+  // ... at the written model's levels where they differ (a level taken over, a re-identified one).
+  bool same = true;
+  for (int v = 0; v < ext.model()->nv; ++v) same &= ext.model()->dof_frictionloss[v] == reg_->model()->dof_frictionloss[v];
+  if (!same) {
+    if (s.soft.size()) pred -= s.soft;
+    Eigen::VectorXd soft = frictionloss_correction(s, ext.model());
+    if (soft.size()) {
+      filter_stacked(s.sos, soft, s.N);
+      pred += soft;
+    }
+  }
   pred += written_stateful(s, ext.model());   // #22: stateful plugins are no regressor columns: simulated as declared
   return pred;
 }

@@ -80,8 +80,8 @@ WrittenForm Diagnosis::written_form(const MjcfEdits& edits) const {
   return mujoco_form(reg_->model(), *degrees_, *defined_joints_, edits);
 }
 
-std::string Diagnosis::write_model(const MjcfEdits& edits, std::vector<std::string>& notes) const {
-  return edit_mjcf(opt_.model, written_form(edits).edits, notes);
+std::string Diagnosis::write_model(const MjcfEdits& edits, std::vector<std::string>& notes, const MjcfEdits* takers) const {
+  return edit_mjcf(opt_.model, written_form(with_take_over(edits, takers)).edits, notes);
 }
 
 // report.json: per written effect how extended.xml holds it, and the notes on what plain MuJoCo

@@ -25,14 +25,18 @@ struct MjcfEdits {
   };
   std::vector<Inertial> inertials;                   // each replaces the body's <inertial>
   std::vector<std::pair<std::string, std::string>> texts;   // <custom><text name data>
+  // <custom><text> elements already in the file: name -> its new data (the model's own plugin
+  // declarations, e.g. a friction level a diagnosed friction takes over)
+  std::map<std::string, std::string> replaced_texts;
   std::string comment;                               // put at the top of the file
 };
 
 // The text of the edited model. Relative asset and include paths are made absolute so the file
 // loads from any folder. Joints and bodies are looked up under <worldbody> only; a <custom><text>
-// name already in the file gets a suffix (_2, _3, ...); the comment goes after an <?xml?>
+// name already in the file gets a suffix (_2, _3, ...), while replaced_texts rewrite the data of
+// the file's own texts of those names; the comment goes after an <?xml?>
 // declaration, with any "--" broken up. What cannot be applied (a joint or body defined in an
-// included file, an unnamed body) is appended to `notes`. Throws std::runtime_error naming the file when it is not
+// included file, an unnamed body, a replaced text the file does not hold) is appended to `notes`. Throws std::runtime_error naming the file when it is not
 // an MJCF or when its compiler settings would override written inertials (inertiafromgeom="true",
 // settotalmass).
 std::string edit_mjcf(const std::string& model_path, const MjcfEdits& edits, std::vector<std::string>& notes);
