@@ -860,6 +860,62 @@ TEST(DiagnoseCases, LuGreWhoseHumpTheImportSmearsIsStickSlip) {
   }
 }
 
+// A model that already states a friction level on the LuGre joint - a declared coulomb plugin,
+// or MuJoCo's frictionloss - at the truth's Coulomb level (the sixth review's elbow, as above):
+// `stick_slip` was fitted with the declared level free beside it (fc 0.044 and fs 36, the
+// level's column holding the rest) and written beside the declared level, and rejected in
+// simulation; extended.xml was the model as given (0.345 % held out). A named friction now
+// takes the level over: fitted without it, written with the model's own level at 0, as good
+// held out as the diagnosis of the model that declares none. And a log of the declaring model
+// itself gets no cause.
+TEST(DiagnoseCases, AFrictionNamedOnAJointTakesOverTheModelsOwnLevel) {
+  const auto dir = test::temp_dir("dc-own-level");
+  auto save = [&](const std::string& name, const std::string& text) {
+    const std::string path = (dir / name).string();
+    std::ofstream(path) << text;
+    return path;
+  };
+  std::string with_frictionloss = kReviewArm6;
+  const std::string elbow = R"(<joint name="elbow" type="hinge" axis="0 1 0" damping="0.25")";
+  with_frictionloss.replace(with_frictionloss.find(elbow), elbow.size(), elbow + R"( frictionloss="0.06")");
+  const std::string plain = save("plain.xml", kReviewArm6), frictionloss = save("frictionloss.xml", with_frictionloss),
+                    declared = save("declared.xml", test::with_declarations(kReviewArm6, {"type=coulomb joints=elbow fc=0.06"})),
+                    lugre = save("true.xml", test::with_declarations(kReviewArm6, {"type=stick_slip joints=elbow fc=0.06 fs=0.12 vs=0.05 sigma0=30 sigma1=1.5 sigma2=0"}));
+  const std::string generate = "--seed 32 --duration 25 --torque-noise 0.015 --encoder-bits 17";
+  const std::string log = test::generated_log(dir, lugre, generate, kReviewArmImport);
+  auto run = [&](const std::string& model, const std::string& data, const std::string& out) {
+    DiagnoseOptions o;
+    o.model = model;
+    o.data = data;
+    o.rollouts = 20;
+    DiagnoseResult r = diagnose(o, (dir / out).string());
+    std::cout << r.summary;
+    return std::move(r.report);
+  };
+  const double reference = run(plain, log, "plain")["final"]["rel_error_test_all"].get<double>();
+  struct Own {
+    const char* out;
+    std::string model, key, written;
+  };
+  for (const Own& own : {Own{"declared", declared, "spml.plugin.hidden0", R"(data="type=coulomb joints=elbow fc=0 )"},
+                         Own{"frictionloss", frictionloss, "frictionloss", R"(frictionloss="0")"}}) {
+    SCOPED_TRACE(own.out);
+    const nlohmann::json r = run(own.model, log, own.out);
+    ASSERT_EQ(written_causes(r), std::vector<std::string>{"stick_slip"}) << r["causes"].dump(1);
+    const nlohmann::json& c = r["causes"][0];
+    EXPECT_EQ(c["joints"][0], "elbow");
+    EXPECT_NEAR(c["params"]["fc"].get<double>(), 0.06, 0.2 * 0.06) << c.dump();
+    EXPECT_TRUE(c.contains("replaces_model_friction") && c["replaces_model_friction"].contains(own.key)) << c.dump();
+    // As good held out as the model without a level of its own: within a tenth.
+    EXPECT_LT(r["final"]["rel_error_test_all"].get<double>(), 1.1 * reference) << r["final"].dump();
+    const std::string ext = test::read_file((dir / own.out / "extended.xml").string());
+    EXPECT_NE(ext.find(own.written), std::string::npos) << ext;
+  }
+  // The declaring model's own data: its level is right, nothing to take over.
+  const nlohmann::json clean = run(declared, test::generated_log(dir, declared, generate, kReviewArmImport, "own"), "own");
+  EXPECT_TRUE(written_causes(clean).empty()) << clean["causes"].dump(1);
+}
+
 // The same arm with LuGre on its shoulder (fc 0.7, fs 1, vs 0.12): its extended.xml diagnosed on a
 // fresh log names `parameters` (the shoulder's damping), whose re-identified values can be
 // written only in part and then fit no better than the MJCF's own, so extended.xml keeps the

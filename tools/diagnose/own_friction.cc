@@ -202,12 +202,11 @@ Fit Diagnosis::level_held(int k, const Fit& current, const std::vector<int>& cho
 // the declared plugin parameters at 0 in their own texts.
 MjcfEdits Diagnosis::with_take_over(const MjcfEdits& e, const MjcfEdits* takers) const {
   const MjcfEdits& t = takers ? *takers : e;
+  // Any candidate's (the rollout test writes one before it is chosen); one per plugin and joint.
   std::vector<int> causes;
-  for (const Cause& cause : causes_) {
-    const Candidate& c = cands_[static_cast<size_t>(cause.candidate)];
+  for (size_t k = 0; k < cands_.size(); ++k)
     for (const auto& text : t.texts)
-      if (text.first == declaration_name(c)) causes.push_back(cause.candidate);
-  }
+      if (text.first == declaration_name(cands_[k])) causes.push_back(static_cast<int>(k));
   MjcfEdits out = e;
   const std::vector<int> joints = taken_over(causes);
   if (joints.empty()) return out;
