@@ -440,3 +440,46 @@ TEST(ConsistentIdentification, CommandWritesTheIdentifiedModelAndRefusesBadInput
               std::string::npos) << e.what();
   }
 }
+
+// A declared linear plugin's re-identified parameter is written into its own declaration (a
+// model that a previous diagnosis extended with a Coulomb friction, its level fitted again):
+// before, it was a note "has no MJCF attribute written here: edit it by hand". Its other
+// parameters and joints stay as declared; a model MuJoCo loads holds the new value.
+TEST(ConsistentIdentification, ADeclaredPluginsParameterIsWrittenIntoItsDeclaration) {
+  const auto dir = test::temp_dir("consistent-plugin");
+  const std::string model = (dir / "declared.xml").string(), out = (dir / "written.xml").string();
+  std::ofstream(model) << R"(<mujoco model="two">
+  <compiler angle="radian" inertiafromgeom="false"/>
+  <worldbody>
+    <body name="a" pos="0 0 0.2">
+      <joint name="j1" type="hinge" axis="0 0 1" damping="0.3"/>
+      <inertial pos="0.1 0 0" mass="1" diaginertia="0.01 0.01 0.01"/>
+      <body name="b" pos="0.2 0 0">
+        <joint name="j2" type="hinge" axis="0 0 1" damping="0.2"/>
+        <inertial pos="0.1 0 0" mass="0.5" diaginertia="0.005 0.005 0.005"/>
+      </body>
+    </body>
+  </worldbody>
+  <custom><text name="spml.plugin.c" data="type=coulomb joints=j1,j2 fc=0.3,0.2 smooth=0"/></custom>
+</mujoco>
+)";
+  const MjcfRegressor reg(model);
+  ConsistentIdentification id;
+  ConsistentTerm t;
+  t.name = "plugin:c.j2.fc";
+  t.prior = 0.2;
+  t.value = 0.45;
+  t.fitted = true;
+  id.terms.push_back(t);
+  std::vector<std::string> notes;
+  const MjcfEdits e = identified_model_edits(reg, id, notes);
+  ASSERT_EQ(e.replaced_texts.count("spml.plugin.c"), 1u) << notes.size() << " notes";
+  EXPECT_EQ(e.replaced_texts.at("spml.plugin.c"), "type=coulomb joints=j1,j2 fc=0.3,0.45 smooth=0");
+  for (const auto& n : notes) EXPECT_EQ(n.find("edit it by hand"), std::string::npos) << n;
+  std::ofstream(out) << edit_mjcf(model, e, notes);
+  const MjcfRegressor written(out);
+  const auto names = written.param_names();
+  const auto at = std::find(names.begin(), names.end(), "plugin:c.j2.fc") - names.begin();
+  ASSERT_LT(static_cast<size_t>(at), names.size());
+  EXPECT_DOUBLE_EQ(written.model_params()[at], 0.45);
+}

@@ -21,6 +21,23 @@ MjcfEdits identified_model_edits(const MjcfRegressor& reg, const ConsistentIdent
     in.fullinertia = b.identified.fullinertia();
     edits.inertials.push_back(in);
   }
+  // Declared plugins: "plugin:<instance>.<parameter>" -> the instance's parameters as fitted.
+  const auto& insts = reg.effects().instances();
+  std::vector<Eigen::VectorXd> theta(insts.size());
+  std::vector<bool> changed(insts.size(), false);
+  auto plugin_parameter = [&](const std::string& name, double value) {
+    for (size_t n = 0; n < insts.size(); ++n) {
+      const auto pnames = insts[n].object.param_names();
+      for (size_t k = 0; k < pnames.size(); ++k)
+        if (name == insts[n].decl.instance + "." + pnames[k]) {
+          if (!theta[n].size()) theta[n] = insts[n].object.params();
+          theta[n][static_cast<Eigen::Index>(k)] = value;
+          changed[n] = true;
+          return true;
+        }
+    }
+    return false;
+  };
   for (const auto& t : id.terms) {
     if (!t.fitted) continue;
     const auto colon = t.name.find(':');
@@ -28,9 +45,31 @@ MjcfEdits identified_model_edits(const MjcfRegressor& reg, const ConsistentIdent
     const bool joint_attr = kind == "armature" || kind == "damping" || kind == "coulomb" || kind == "stiffness";
     if (joint_attr && mj_name2id(reg.model(), mjOBJ_JOINT, what.c_str()) >= 0)
       edits.joint_attributes[what][kind == "coulomb" ? "frictionloss" : kind] = t.value;
-    else if (t.value != t.prior)
+    else if (t.value != t.prior && !(kind == "plugin" && plugin_parameter(what, t.value)))
       notes.push_back(t.name + " = " + std::to_string(t.value) + " (model: " + std::to_string(t.prior) +
                       ") has no MJCF attribute written here: edit it by hand");
+  }
+  for (size_t n = 0; n < insts.size(); ++n) {
+    if (!changed[n]) continue;
+    const auto& d = insts[n].decl;
+    std::vector<int> joints;
+    for (const auto& j : d.joints) joints.push_back(mj_name2id(reg.model(), mjOBJ_JOINT, j.c_str()));
+    std::string config;
+    try {
+      PluginInstance inst(insts[n].plugin(), reg.model(), joints, d.config, d.element);
+      inst.set_params(theta[n]);
+      config = inst.config_text();
+    } catch (const PluginError& e) {
+      notes.push_back(d.element + ": its identified parameters are refused by the plugin (" + e.what() + "): edit it by hand");
+      continue;
+    }
+    if (config.empty()) {
+      notes.push_back(d.element + ": the plugin cannot write its configuration: its identified parameters are not written, edit it by hand");
+      continue;
+    }
+    std::string names;
+    for (const auto& j : d.joints) names += (names.empty() ? "" : ",") + j;
+    edits.replaced_texts["spml.plugin." + d.instance] = "type=" + d.type + " joints=" + names + " " + config;
   }
   return edits;
 }

@@ -78,6 +78,7 @@ struct SplitData {
   Eigen::Index N = 0;
   std::vector<Section> sos;       // the parallel filter on this split's time base (empty: none)
   std::vector<Eigen::Index> runs; // first rows of the records after the first (several --data)
+  const SplitData* continues = nullptr;   // the split whose record this one continues (a hold-out from its end; stateful plugins carry their state)
 };
 
 // A candidate cause: one plugin on one joint, with its shape chosen.
@@ -264,7 +265,7 @@ class Diagnosis {
   Eigen::VectorXd frictionloss_correction(const SplitData& d, const mjModel* m) const;
   void add_declared_forces(const SplitData& d, Eigen::VectorXd& into) const;
   // prepare.cc
-  SplitData prepare(const Split& s, const std::vector<Eigen::Index>& runs = {});
+  SplitData prepare(const Split& s, const std::vector<Eigen::Index>& runs = {}, const SplitData* continues = nullptr);
   void plan_parallel_filter();
   void apply_filter(SplitData& d) const;
   // candidates.cc
@@ -428,6 +429,8 @@ class Diagnosis {
   MjcfRegressor::Base base_;
   Dataset ds_;
   std::string test_name_;
+  bool held_out_from_fit_ = false;
+  std::vector<std::pair<Eigen::Index, Eigen::Index>> washout_;   // #22: (first row, rows) of the fit split a stateful fit leaves out (load.cc)   // the test split is the last rows of the fit split's record (choose_splits)
   SplitData fit_, test_;
   std::vector<std::pair<std::string, SplitData>> cross_;   // (file, split)
   std::vector<std::string> out_joints_;   // per output: joint name

@@ -48,7 +48,7 @@ void Diagnosis::load() {
   fit_ = prepare(fit_part, fit_runs);
   map_outputs();
   plan_parallel_filter();
-  test_ = prepare(test_part, test_runs);
+  test_ = prepare(test_part, test_runs, held_out_from_fit_ && fit_runs.empty() ? &fit_ : nullptr);
   load_cross();
   if (fit_.split.y_columns != test_.split.y_columns)
     throw DatasetError(where + "the fit and test splits have different torque columns");
@@ -113,6 +113,7 @@ void Diagnosis::choose_splits(const Dataset& ds, const std::string& file, Split&
                        " % leaves " + std::to_string(k) + " to fit and " + std::to_string(n - k) + " to test; each needs at least " +
                        std::to_string(kMinRows));
   test_part = fit.slice(k, n, test_name_);
+  held_out_from_fit_ = true;
   const std::string note = "the dataset has one split: its last " + fmt(100 * opt_.holdout, 3) + " % of rows (in time order) are held out as the test split";
   if (std::find(notes_.begin(), notes_.end(), note) == notes_.end()) notes_.push_back(note);
 }

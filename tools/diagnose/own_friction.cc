@@ -211,24 +211,35 @@ MjcfEdits Diagnosis::with_take_over(const MjcfEdits& e, const MjcfEdits* takers)
   const std::vector<int> joints = taken_over(causes);
   if (joints.empty()) return out;
   const auto& insts = declared_->instances();
-  std::map<size_t, Eigen::VectorXd> zeroed;   // declared instance -> its parameters with the taken levels at 0
+  std::map<size_t, std::vector<bool>> zeroed;   // declared instance -> its parameters taken over
   for (int j : joints) {
     const OwnLevel& L = own_levels_[static_cast<size_t>(j)];
     if (L.frictionloss != 0) out.joint_attributes[reg_->joint_names()[static_cast<size_t>(j)]]["frictionloss"] = 0;
     for (const auto& [n, k] : L.params) {
-      if (!zeroed.count(n)) zeroed[n] = insts[n].object.params();
-      zeroed[n][k] = 0;
+      if (!zeroed.count(n)) zeroed[n].assign(static_cast<size_t>(insts[n].object.nparam()), false);
+      zeroed[n][static_cast<size_t>(k)] = true;
     }
   }
-  for (const auto& [n, theta] : zeroed) {
+  for (const auto& [n, taken] : zeroed) {
     const auto& d = insts[n].decl;
-    PluginInstance inst(insts[n].plugin(), reg_->model(), joint_ids(d.joints), d.config, d.element);
+    // Re-identified by `parameters` (identified_model_edits rewrote the text): from those values.
+    std::vector<std::pair<std::string, std::string>> words = d.config;
+    const std::string text_name = "spml.plugin." + d.instance;
+    if (const auto it = out.replaced_texts.find(text_name); it != out.replaced_texts.end()) {
+      words.clear();
+      for (auto& kv : parse_config_words(it->second, d.element))
+        if (kv.first != "type" && kv.first != "joints") words.push_back(std::move(kv));
+    }
+    PluginInstance inst(insts[n].plugin(), reg_->model(), joint_ids(d.joints), words, d.element);
+    Eigen::VectorXd theta = inst.params();
+    for (size_t k = 0; k < taken.size(); ++k)
+      if (taken[k]) theta[static_cast<Eigen::Index>(k)] = 0;
     inst.set_params(theta);
     const std::string config = inst.config_text();
     if (config.empty()) continue;   // the plugin cannot write itself: its text stays as declared
     std::string joints_text;
     for (const auto& name : d.joints) joints_text += (joints_text.empty() ? "" : ",") + name;
-    out.replaced_texts["spml.plugin." + d.instance] = "type=" + d.type + " joints=" + joints_text + " " + config;
+    out.replaced_texts[text_name] = "type=" + d.type + " joints=" + joints_text + " " + config;
   }
   return out;
 }

@@ -5,11 +5,12 @@
 
 namespace spml::diagnose_detail {
 
-SplitData Diagnosis::prepare(const Split& s, const std::vector<Eigen::Index>& runs) {
+SplitData Diagnosis::prepare(const Split& s, const std::vector<Eigen::Index>& runs, const SplitData* continues) {
   SplitData d;
   d.name = s.name;
   d.split = s;
   d.runs = runs;
+  d.continues = continues;
   const std::string where = opt_.data + ": ";
   try {
     d.cols = std::make_unique<JointColumns>(*reg_, s);

@@ -52,6 +52,8 @@ class MjcfRegressor {
   const mjModel* model() const { return m_.get(); }
   int nv() const { return m_->nv; }
   const std::vector<std::string>& joint_names() const { return joints_; }
+  // The model's declared force plugins (their linear parameters are standard parameters "plugin:...").
+  const ForceEffects& effects() const { return *effects_; }
 
   // Standard parameters: names and the values of the loaded model (pi such that
   // Y * pi = mj_inverse of that model, plugins included).
