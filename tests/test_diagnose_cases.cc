@@ -916,6 +916,68 @@ TEST(DiagnoseCases, AFrictionNamedOnAJointTakesOverTheModelsOwnLevel) {
   EXPECT_TRUE(written_causes(clean).empty()) << clean["causes"].dump(1);
 }
 
+// A seventh review's 3-hinge arm with LuGre on its shoulder (fc 0.7, fs 1.4, vs 0.08, sigma0 300;
+// 2 %, 17 bit, the 10 Hz import), diagnosed with the true model: the test split is the last 30 %
+// of the log, and it started in a slow slide where the bristles are far from the steady state
+// of that row's motion. Started there, 73 % of the true model's held-out error lay in the test
+// split's first half second (0.542 % in all); carried along the fit split, the state starts
+// where the record left it (0.295 %), and the first half second is no worse than the rest.
+TEST(DiagnoseCases, AHeldOutSplitContinuesTheFitSplitsBristleState) {
+  const std::string arm = R"(<mujoco model="rev7_arm">
+  <compiler angle="radian" inertiafromgeom="false"/>
+  <option timestep="0.0005" gravity="0 0 -9.81">
+    <flag contact="disable"/>
+  </option>
+  <worldbody>
+    <body name="base" pos="0 0 0.3">
+      <joint name="yaw" type="hinge" axis="0 0 1" damping="0.4" armature="0.03"/>
+      <inertial pos="0 0 0.05" mass="3.2" diaginertia="0.021 0.021 0.012"/>
+      <body name="upper" pos="0 0 0.12">
+        <joint name="shoulder" type="hinge" axis="0 1 0" damping="0.6" armature="0.05"/>
+        <inertial pos="0.18 0 0" mass="2.1" diaginertia="0.004 0.027 0.026"/>
+        <body name="fore" pos="0.36 0 0">
+          <joint name="elbow" type="hinge" axis="0 1 0" damping="0.25" armature="0.02"/>
+          <inertial pos="0.14 0 0.01" mass="1.15" diaginertia="0.0015 0.0095 0.009"/>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+)";
+  const auto dir = test::temp_dir("dc-carried");
+  const std::string truth = (dir / "true.xml").string();
+  std::ofstream(truth) << test::with_declarations(arm, {"type=stick_slip joints=shoulder fc=0.7 fs=1.4 vs=0.08 sigma0=300 sigma1=3 sigma2=0"});
+  DiagnoseOptions o;
+  o.model = truth;
+  o.data = test::generated_log(dir, truth, "--seed 204 --duration 25 --torque-noise 0.02 --encoder-bits 17", kReviewArmImport);
+  o.rollouts = 0;
+  const auto r = diagnose(o, (dir / "d").string());
+  EXPECT_TRUE(written_causes(r.report).empty()) << r.report["causes"].dump(1);
+  // The true model's held-out residual on the shoulder (series.csv: tau - given), its first
+  // half second against the rest.
+  std::ifstream series(dir / "d" / "series.csv");
+  std::string line;
+  std::getline(series, line);
+  std::vector<std::string> head;
+  for (std::stringstream h(line); std::getline(h, line, ',');) head.push_back(line);
+  const auto col = [&](const std::string& name) { return std::find(head.begin(), head.end(), name) - head.begin(); };
+  const auto t_col = col("t"), tau = col("tau:shoulder"), given = col("given:shoulder");
+  double t0 = -1, first = 0, rest = 0;
+  int n_first = 0, n_rest = 0;
+  while (std::getline(series, line)) {
+    std::vector<std::string> f;
+    for (std::stringstream row(line); std::getline(row, line, ',');) f.push_back(line);
+    if (f[0] == "fit") continue;
+    const double t = std::stod(f[static_cast<size_t>(t_col)]), e = std::stod(f[static_cast<size_t>(tau)]) - std::stod(f[static_cast<size_t>(given)]);
+    if (t0 < 0) t0 = t;
+    (t - t0 < 0.5 ? first : rest) += e * e;
+    ++(t - t0 < 0.5 ? n_first : n_rest);
+  }
+  ASSERT_GT(n_first, 50);
+  ASSERT_GT(n_rest, 500);
+  EXPECT_LT(std::sqrt(first / n_first), 1.5 * std::sqrt(rest / n_rest)) << "RMS " << std::sqrt(first / n_first) << " in the first half second, " << std::sqrt(rest / n_rest) << " after";
+}
+
 // The same arm with LuGre on its shoulder (fc 0.7, fs 1, vs 0.12): its extended.xml diagnosed on a
 // fresh log names `parameters` (the shoulder's damping), whose re-identified values can be
 // written only in part and then fit no better than the MJCF's own, so extended.xml keeps the

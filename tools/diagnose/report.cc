@@ -24,6 +24,18 @@ std::string pct(double v) { return num(100 * v, 3) + " %"; }
 // A superseded cause: by the later effect named, or, where no single later one holds it,
 // "redundant" in report.json - said in words here ("superseded by redundant" read as if an
 // effect of that name had replaced it).
+// The model's own level a friction takes over (causes[].replaces_model_friction), as one phrase:
+// "frictionloss 0.69" or "spml.plugin.c shoulder.fc 0.69".
+std::string replaced_text(const nlohmann::json& own) {
+  std::string out;
+  for (const auto& [what, v] : own.items()) {
+    if (v.is_number()) out += (out.empty() ? "" : ", ") + what + " " + num(v.get<double>());
+    else
+      for (const auto& [p, x] : v.items()) out += (out.empty() ? "" : ", ") + what + " " + p + " " + num(x.get<double>());
+  }
+  return out;
+}
+
 std::string superseded_text(const nlohmann::json& c) {
   const std::string by = c["superseded_by"].get<std::string>();
   return by == "redundant" ? "dropped: not needed beside the other causes" : "superseded by " + by;
@@ -81,6 +93,7 @@ std::string report_summary(const nlohmann::json& r) {
     s << "  (dBIC " << num(c["delta_bic"].get<double>(), 5) << ", test error after " << pct(c["rel_error_test_after_all"].get<double>()) << ")";
     if (c.contains("superseded_by")) s << "  " << superseded_text(c);
     if (c.contains("rejected")) s << "  REJECTED: " << c["rejected"].value("summary", "in simulation, rollouts worse with it");
+    if (c.contains("replaces_model_friction")) s << "  replaces the model's own level " << replaced_text(c["replaces_model_friction"]);
     s << "\n";
   }
   if (r["causes"].empty()) s << "  no cause found: nothing passes the evidence and held-out tests\n";
@@ -139,6 +152,8 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
       << pct(c["rel_error_test_after_all"].get<double>());
     if (c.contains("superseded_by")) s << " (" << superseded_text(c) << ")";
     if (c.contains("rejected")) s << " - **rejected, not in extended.xml**: " << c["rejected"].value("reason", "");
+    if (c.contains("replaces_model_friction"))
+      s << " - replaces the model's own friction level " << replaced_text(c["replaces_model_friction"]) << " (0 in extended.xml)";
     s << "\n   - " << params_text(c, "\n   - ") << "\n";
     if (c.value("written_as", "") == "mjcf") {   // a spring or viscous friction in MuJoCo's own terms (written_form.cc)
       const auto& m = c["mjcf"];

@@ -178,11 +178,7 @@ nlohmann::json Diagnosis::effect_cause(size_t i, const Fit& final_fit, bool free
       edits.texts.emplace_back(name, declaration_text(c, config));
       j["declaration"] = edits.texts.back().second;
       // The model's own level on the joint is this cause's to carry (own_friction.cc).
-      if (const nlohmann::json own = replaced_friction(cause.candidate); !own.empty()) {
-        j["replaces_model_friction"] = own;
-        notes.push_back(std::string(c.plugin->name) + " on " + c.joint_name + " replaces the model's own friction level there (" + own.dump() +
-                        "): extended.xml states it as 0 while " + c.plugin->name + " is written");
-      }
+      if (const nlohmann::json own = replaced_friction(cause.candidate); !own.empty()) j["replaces_model_friction"] = own;
     }
   }
   return j;

@@ -91,9 +91,14 @@ nlohmann::json Diagnosis::report_written_form(const MjcfEdits& edits, std::vecto
   const WrittenForm w = written_form(edits);
   std::vector<std::string> native, ignored;
   for (auto& c : causes) {
+    // What a friction takes over is said only where extended.xml writes it (own_friction.cc).
+    if (c.contains("rejected") || c.contains("superseded_by")) c.erase("replaces_model_friction");
     if (!c.contains("declaration") || c.contains("rejected") || c.contains("superseded_by")) continue;
     const std::string data = c["declaration"].get<std::string>();
     const std::string what = c["effect"].get<std::string>() + "@" + c["joints"][0].get<std::string>();
+    if (c.contains("replaces_model_friction"))
+      notes.push_back(what + " replaces the model's own friction level on its joint (" + c["replaces_model_friction"].dump() +
+                      "): extended.xml states that level as 0");
     if (const auto it = w.as_mjcf.find(data); it != w.as_mjcf.end()) {
       c["written_as"] = "mjcf";
       c["mjcf"] = it->second;
