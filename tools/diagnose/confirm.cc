@@ -42,8 +42,7 @@ nlohmann::json per_joint_errors(const RolloutResult& r) {
 MjcfEdits without_cause(const MjcfEdits& edits, const nlohmann::json& cause) {
   MjcfEdits out = edits;
   if (cause["effect"] == "parameters") {
-    out.joint_attributes.clear();
-    out.inertials.clear();
+    drop_parameters(out);
   } else {
     const std::string decl = cause.value("declaration", "");
     out.texts.erase(std::remove_if(out.texts.begin(), out.texts.end(), [&](const auto& t) { return t.second == decl; }), out.texts.end());
@@ -76,7 +75,7 @@ nlohmann::json rejected_causes(const nlohmann::json& causes) {
 void Diagnosis::note_rejections(const MjcfEdits& edits, std::vector<std::string>& notes) {
   nlohmann::json& R = result_.report;
   const nlohmann::json rejected = rejected_causes(R["causes"]);
-  if (edits.joint_attributes.empty() && edits.inertials.empty())
+  if (!writes_parameters(edits))
     R["parameters_written"] = "none";
   else if (rejected.dump().find("parameters@") != std::string::npos)
     R["parameters_written"] = "partial";
@@ -138,7 +137,7 @@ bool Diagnosis::confirm_in_simulation(const std::string& ext_path, MjcfEdits& ed
           trial.joint_attributes.erase(before.joints[j]);
           if ((dropped = better_without(trial, record))) c["rejected_joint_terms"][before.joints[j]] = record;
         }
-        if (!dropped && (!edits.inertials.empty() || !edits.joint_attributes.empty()) && (dropped = better_without(without_cause(edits, c), record)))
+        if (!dropped && writes_parameters(edits) && (dropped = better_without(without_cause(edits, c), record)))
           c["rejected"] = record;
       }
       if (dropped) continue;
@@ -320,9 +319,8 @@ bool Diagnosis::guard_held_out(const std::string& ext_path, MjcfEdits& edits, st
                           fmt(std::sqrt(given) / test_.b.norm(), 8) + ")";
   const nlohmann::json record = {{"reason", why + "; extended.xml leaves it out"}, {"summary", "held-out error worse than the model as given"}};
   std::vector<std::string> ignored;
-  if (parameters_named_ && (!edits.joint_attributes.empty() || !edits.inertials.empty())) {
-    edits.joint_attributes.clear();
-    edits.inertials.clear();
+  if (parameters_named_ && writes_parameters(edits)) {
+    drop_parameters(edits);
     R["causes"][delay_.named ? 1 : 0]["rejected"] = record;   // `parameters`, after a named `delay`
     R["parameters_written"] = "none";
     notes.push_back(why + ": the re-identified parameters are left out and the effects fitted again with the MJCF's own");

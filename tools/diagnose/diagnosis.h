@@ -119,6 +119,15 @@ struct Candidate {
 
 bool is_stateful(const spml_force_plugin& p);   // #22: advance/reset and no regressor
 
+// `parameters`' part of the edits: joint attributes, body inertials, and the declared plugins'
+// own texts with their re-identified parameters (identified_model_edits).
+inline bool writes_parameters(const MjcfEdits& e) { return !e.joint_attributes.empty() || !e.inertials.empty() || !e.replaced_texts.empty(); }
+inline void drop_parameters(MjcfEdits& e) {
+  e.joint_attributes.clear();
+  e.inertials.clear();
+  e.replaced_texts.clear();
+}
+
 // The <custom><text> name a named effect is declared under in extended.xml.
 inline constexpr const char* kDiagnosedPrefix = "spml.plugin.diagnosed_";
 inline std::string declaration_name(const Candidate& c) { return kDiagnosedPrefix + std::string(c.plugin->name) + "_" + c.joint_name; }

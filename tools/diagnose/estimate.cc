@@ -12,18 +12,28 @@ std::vector<const BlockColumns*> Diagnosis::blocks(const std::vector<int>& cause
 }
 
 // robust: standard errors from the long-run covariance of the residuals (statistics.h).
-// Held at the MJCF's values, the base parameters are held without the own levels the causes
-// take over (own_friction.cc).
+// Held at the MJCF's values or free, the base parameters hold none of the own levels the causes
+// take over (own_friction.cc): their force is returned to the targets.
 Fit Diagnosis::refit(const std::vector<int>& causes, bool base_free, bool robust) const {
-  const Eigen::VectorXd returned = base_free ? Eigen::VectorXd() : returned_levels(fit_, causes);
-  return fit_blocks(blocks(causes, base_free), returned.size() ? Eigen::VectorXd(fit_.y0 + returned) : fit_.y0, true, robust ? fit_.N : 0);
+  const Eigen::VectorXd returned = returned_levels(fit_, causes);
+  if (!returned.size()) return fit_blocks(blocks(causes, base_free), fit_.y0, true, robust ? fit_.N : 0);
+  std::vector<const BlockColumns*> with = blocks(causes, base_free);
+  BlockColumns base;
+  if (base_free) {   // free, the base parameters still hold no taken level: its columns are 0 (undetermined, coefficient 0)
+    base = fit_.base;
+    const std::vector<int> joints = taken_over(causes);
+    for (int i = 0; i < base.cols; ++i)
+      if (own_level_parameter(i, joints))
+        for (auto& part : base.parts) part.col(i).setZero();
+    with[0] = &base;
+  }
+  return fit_blocks(with, fit_.y0 + returned, true, robust ? fit_.N : 0);
 }
 
 // Residual of a fit on another split (test, cross): the causes' columns evaluated there.
 Eigen::VectorXd Diagnosis::residual_on(const SplitData& s, const std::vector<int>& causes, bool base_free, const Fit& f) const {
   Eigen::VectorXd pred = Eigen::VectorXd::Zero(s.y0.size());
-  if (!base_free)
-    if (const Eigen::VectorXd returned = returned_levels(s, causes); returned.size()) pred -= returned;
+  if (const Eigen::VectorXd returned = returned_levels(s, causes); returned.size()) pred -= returned;   // a taken level's coefficient is 0 (refit)
   Eigen::Index c = 0;
   if (base_free) {
     pred += s.base.times(f.coef.segment(0, s.base.cols));

@@ -106,6 +106,7 @@ nlohmann::json Diagnosis::parameters_cause(MjcfEdits& edits, std::vector<std::st
   parameters_partial_ = notes.size() > before;
   edits.joint_attributes = id_edits.joint_attributes;
   edits.inertials = id_edits.inertials;
+  edits.replaced_texts = id_edits.replaced_texts;   // a declared plugin's re-identified parameters
   j["written"] = written_parameters_json(*written_, out_joints_);
   return j;
 }
