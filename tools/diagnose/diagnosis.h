@@ -238,6 +238,8 @@ Split in_column_order(const Split& s, const std::vector<std::string>& order, con
 // The subjects (joint or body names) of the terms of a base parameter's name, e.g.
 // "armature:joint1 + 0.5*Izz:link1" -> joint1, link1: exact names, so joint1 is not joint10.
 std::vector<std::string> term_subjects(const std::string& base_name);
+// Its terms as standard parameter names, their factors dropped ("damping:joint1", "Izz:link1").
+std::vector<std::string> term_names(const std::string& base_name);
 
 // Evidence for the larger of two nested fits (Bayesian information criterion, n equations -
 // the effective number where residuals are autocorrelated - dk more parameters): positive when

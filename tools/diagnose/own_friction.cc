@@ -18,25 +18,6 @@
 #include "diagnosis.h"
 
 namespace spml::diagnose_detail {
-namespace {
-
-// The terms of a base parameter's name ("coulomb:j1 + 0.5*damping:j1"), their factors dropped.
-std::vector<std::string> term_names(const std::string& name) {
-  std::vector<std::string> out;
-  size_t start = 0;
-  for (;;) {
-    size_t end = std::string::npos;
-    for (const char* sep : {" + ", " - "}) end = std::min(end, name.find(sep, start));
-    std::string term = name.substr(start, end == std::string::npos ? std::string::npos : end - start);
-    if (const auto star = term.find('*'); star != std::string::npos && star < term.find(':')) term = term.substr(star + 1);
-    out.push_back(term);
-    if (end == std::string::npos) break;
-    start = end + 3;
-  }
-  return out;
-}
-
-}  // namespace
 
 // Per model joint: frictionloss, and the declared linear plugin parameters whose force on that
 // joint is a pure level (the same size and opposed to the motion at every speed and position

@@ -26,18 +26,25 @@ void put_after(nlohmann::json& j, const nlohmann::json& after) {
 
 }  // namespace
 
-std::vector<std::string> term_subjects(const std::string& name) {
+std::vector<std::string> term_names(const std::string& name) {
   std::vector<std::string> out;
   size_t start = 0;
   for (;;) {
     size_t end = std::string::npos;
     for (const char* sep : {" + ", " - "}) end = std::min(end, name.find(sep, start));
-    const std::string term = name.substr(start, end == std::string::npos ? std::string::npos : end - start);
-    const auto colon = term.find(':');
-    if (colon != std::string::npos) out.push_back(term.substr(colon + 1));
+    std::string term = name.substr(start, end == std::string::npos ? std::string::npos : end - start);
+    if (const auto star = term.find('*'); star != std::string::npos && star < term.find(':')) term = term.substr(star + 1);
+    out.push_back(term);
     if (end == std::string::npos) break;
     start = end + 3;
   }
+  return out;
+}
+
+std::vector<std::string> term_subjects(const std::string& name) {
+  std::vector<std::string> out;
+  for (const auto& term : term_names(name))
+    if (const auto colon = term.find(':'); colon != std::string::npos) out.push_back(term.substr(colon + 1));
   return out;
 }
 
