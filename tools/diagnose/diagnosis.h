@@ -412,6 +412,7 @@ class Diagnosis {
   std::vector<int> taken_over(const std::vector<int>& causes) const;
   Eigen::VectorXd returned_levels(const SplitData& s, const std::vector<int>& causes) const;
   bool own_level_parameter(int i, const std::vector<int>& joints) const;
+  std::optional<BlockColumns> base_without_taken(const BlockColumns& base, const std::vector<int>& causes) const;
   bool taken_level(int i, const std::vector<int>& causes) const;
   Fit level_held(int k, const Fit& current, const std::vector<int>& chosen) const;
   MjcfEdits with_take_over(const MjcfEdits& e, const MjcfEdits* takers = nullptr) const;

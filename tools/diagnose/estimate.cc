@@ -18,15 +18,8 @@ Fit Diagnosis::refit(const std::vector<int>& causes, bool base_free, bool robust
   const Eigen::VectorXd returned = returned_levels(fit_, causes);
   if (!returned.size()) return fit_blocks(blocks(causes, base_free), fit_.y0, true, robust ? fit_.N : 0);
   std::vector<const BlockColumns*> with = blocks(causes, base_free);
-  BlockColumns base;
-  if (base_free) {   // free, the base parameters still hold no taken level: its columns are 0 (undetermined, coefficient 0)
-    base = fit_.base;
-    const std::vector<int> joints = taken_over(causes);
-    for (int i = 0; i < base.cols; ++i)
-      if (own_level_parameter(i, joints))
-        for (auto& part : base.parts) part.col(i).setZero();
-    with[0] = &base;
-  }
+  std::optional<BlockColumns> base;   // free, the base parameters still hold no taken level
+  if (base_free && (base = base_without_taken(fit_.base, causes))) with[0] = &*base;
   return fit_blocks(with, fit_.y0 + returned, true, robust ? fit_.N : 0);
 }
 

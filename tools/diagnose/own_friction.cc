@@ -152,6 +152,18 @@ bool Diagnosis::own_level_parameter(int i, const std::vector<int>& joints) const
   return true;
 }
 
+// The base block of a fit with `causes` where they take over own levels: a copy with those
+// levels' columns zero (undetermined, coefficient 0); none where they take over nothing.
+std::optional<BlockColumns> Diagnosis::base_without_taken(const BlockColumns& base, const std::vector<int>& causes) const {
+  const std::vector<int> joints = taken_over(causes);
+  if (joints.empty()) return std::nullopt;
+  BlockColumns out = base;
+  for (int i = 0; i < out.cols; ++i)
+    if (own_level_parameter(i, joints))
+      for (auto& part : out.parts) part.col(i).setZero();
+  return out;
+}
+
 // Is base parameter i the own level of a joint `causes` take over?
 bool Diagnosis::taken_level(int i, const std::vector<int>& causes) const { return own_level_parameter(i, taken_over(causes)); }
 

@@ -388,11 +388,15 @@ void Diagnosis::decide_parameters() {
   for (int k : effects)
     if (cands_[static_cast<size_t>(k)].stateful) keys.push_back(key_columns(cands_[static_cast<size_t>(k)]));
   std::vector<const BlockColumns*> with = blocks(effects, true);
+  const std::optional<BlockColumns> untaken = base_without_taken(fit_.base, effects);   // own_friction.cc
+  if (untaken) with[0] = &*untaken;
+  const Eigen::VectorXd returned = returned_levels(fit_, effects);
+  const Eigen::VectorXd y0 = returned.size() ? Eigen::VectorXd(fit_.y0 + returned) : fit_.y0;
   const size_t unkeyed = with.size();
   for (const BlockColumns& g : keys)
     if (g.cols > 0) with.push_back(&g);
   const bool keyed = with.size() > unkeyed;
-  const Fit loose = keyed ? fit_blocks(with, fit_.y0, false, fit_.N) : free;
+  const Fit loose = keyed ? fit_blocks(with, y0, false, fit_.N) : free;
   // The offset's shift of the base parameters, with the keys free on both sides; the standard
   // errors grow by the larger of the two ratios: the robust error with the offset free can come
   // out smaller than with the keys alone, and a slow LuGre draw had the bristles' damping named
@@ -400,7 +404,7 @@ void Diagnosis::decide_parameters() {
   Fit shifted = loose;
   if (offset.cols > 0) {
     with.push_back(&offset);
-    shifted = fit_blocks(with, fit_.y0, false, fit_.N);
+    shifted = fit_blocks(with, y0, false, fit_.N);
     parameters_fit_.coef.head(base_.rank) += shifted.coef.head(base_.rank) - loose.coef.head(base_.rank);
   }
   Eigen::VectorXd grown = Eigen::VectorXd::Ones(base_.rank);
@@ -513,11 +517,16 @@ Fit Diagnosis::iv_refit(const std::vector<int>& causes, const Eigen::VectorXd& m
       m.parts[a].array().colwise() *= mask.segment(m.active[a] * m.rows_per_output, m.rows_per_output).array();
     return &m;
   };
+  // The own levels the causes take over are in no fit with them (own_friction.cc).
+  const std::optional<BlockColumns> base = base_without_taken(fit_.base, causes);
+  const std::optional<BlockColumns> twin_base = twin_ ? base_without_taken(twin_->base, causes) : std::nullopt;
+  const Eigen::VectorXd returned = returned_levels(fit_, causes);
+  const Eigen::VectorXd y0 = returned.size() ? Eigen::VectorXd(fit_.y0 + returned) : fit_.y0;
   std::vector<const BlockColumns*> F;
-  for (const BlockColumns* b : blocks(causes, true)) F.push_back(use(*b));
-  const Eigen::VectorXd y = masking ? Eigen::VectorXd(fit_.y0.cwiseProduct(mask)) : fit_.y0;
+  for (const BlockColumns* b : blocks(causes, true)) F.push_back(use(b == &fit_.base && base ? *base : *b));
+  const Eigen::VectorXd y = masking ? Eigen::VectorXd(y0.cwiseProduct(mask)) : y0;
   if (!twin_) return masking ? fit_blocks(F, y, false, fit_.N) : refit(causes, true, true);
-  std::vector<const BlockColumns*> inst{use(twin_->base)};
+  std::vector<const BlockColumns*> inst{use(twin_base ? *twin_base : twin_->base)};
   for (int c : causes) inst.push_back(use(owned.emplace_back(columns_of(cands_[static_cast<size_t>(c)], *twin_))));
   return iv_fit_blocks(F, inst, y, fit_.N);
 }
