@@ -107,7 +107,8 @@ void generate_model(const ModelArgs& a, const std::string& out, std::uint64_t se
     write_dataset(out, measured_dataset(run, a.derive, a.model));
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   std::cout << a.model << " -> " << out << " (" << run.t.size() << " samples at " << o.rate << " Hz, " << run.joints.size()
-            << " joints, integration step " << run.sim_timestep << " s) in " << s << " s\n  RMS torque:";
+            << " joints, integration step " << run.sim_timestep << " s: at least 4 per sample and no longer than the model's timestep) in " << s
+            << " s\n  RMS torque:";
   for (size_t j = 0; j < run.joints.size(); ++j) std::cout << " " << run.joints[j] << " " << run.rms[static_cast<Eigen::Index>(j)];
   std::cout << "\n  plugins: " << (run.plugins.empty() ? "none" : run.plugins) << "\n";
   if (!csv && !a.derive)
