@@ -916,6 +916,77 @@ TEST(DiagnoseCases, AFrictionNamedOnAJointTakesOverTheModelsOwnLevel) {
   EXPECT_TRUE(written_causes(clean).empty()) << clean["causes"].dump(1);
 }
 
+// An eighth review's 3-hinge arm, 1 %, 17 bit, the 10 Hz import, each log diagnosed with the plain
+// model and with one that states a friction level on the joint of the hidden friction:
+// - LuGre on the shoulder (fc 0.6, fs 1, vs 0.03; seed 202), Coulomb 0.58 declared: `stick_slip`
+//   was judged in simulation at its keys before the amplitude refit (3 % low), rolled out worse
+//   than the declared level (0.670 against 0.621 mrad) and was rejected: 2.10 % held out where
+//   the plain model's diagnosis leaves 0.285 %. The written effects are now refitted first.
+// - A Stribeck curve on the elbow (fc 0.3, fs 0.6, vs 0.2; seed 203), frictionloss 0.6 (twice
+//   the curve's level): nothing was named (4.17 %), the free frictionloss column sharing the
+//   level with every candidate; the plain model's diagnosis leaves 0.906 %. A fit with a cause
+//   that takes a level over now holds none of it, the base parameters free or not.
+// Either way, as good held out as the plain model's diagnosis (within a fifth).
+TEST(DiagnoseCases, ALevelTakenOverIsJudgedAsWrittenAndNotSharedWithTheBase) {
+  const std::string arm = R"(<mujoco model="rev8arm">
+  <compiler angle="radian" inertiafromgeom="false"/>
+  <option timestep="0.0005" gravity="0 0 -9.81">
+    <flag contact="disable"/>
+  </option>
+  <worldbody>
+    <body name="base" pos="0 0 0.1">
+      <joint name="yaw" type="hinge" axis="0 0 1" damping="0.4" armature="0.08"/>
+      <inertial pos="0.02 0 0.05" mass="2.3" diaginertia="0.021 0.019 0.012"/>
+      <body name="upper" pos="0 0 0.12">
+        <joint name="shoulder" type="hinge" axis="0 1 0" damping="0.25" armature="0.05"/>
+        <inertial pos="0.17 0 0.004" mass="1.45" diaginertia="0.0031 0.0182 0.0171"/>
+        <body name="fore" pos="0.35 0 0">
+          <joint name="elbow" type="hinge" axis="0 1 0" damping="0.12" armature="0.025"/>
+          <inertial pos="0.13 0.003 0" mass="0.72" diaginertia="0.0011 0.0067 0.0063"/>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+)";
+  struct Draw {
+    const char* name;
+    int seed;
+    const char* hidden;
+    const char* joint;
+    std::string declaring;
+  };
+  std::string elbow_frictionloss = arm;
+  const std::string elbow = R"(<joint name="elbow" type="hinge" axis="0 1 0" damping="0.12" armature="0.025")";
+  elbow_frictionloss.replace(elbow_frictionloss.find(elbow), elbow.size(), elbow + R"( frictionloss="0.6")");
+  for (const Draw& d : {Draw{"lugre", 202, "type=stick_slip joints=shoulder fc=0.6 fs=1.0 vs=0.03 sigma0=400 sigma1=3 sigma2=0", "shoulder",
+                             test::with_declarations(arm, {"type=coulomb joints=shoulder fc=0.58"})},
+                        Draw{"stribeck", 203, "type=stribeck joints=elbow fc=0.3 fs=0.6 vs=0.2", "elbow", elbow_frictionloss}}) {
+    SCOPED_TRACE(d.name);
+    const auto dir = test::temp_dir(std::string("dc-taken-") + d.name);
+    const std::string truth = (dir / "true.xml").string(), plain = (dir / "plain.xml").string(), declaring = (dir / "declaring.xml").string();
+    std::ofstream(truth) << test::with_declarations(arm, {d.hidden});
+    std::ofstream(plain) << arm;
+    std::ofstream(declaring) << d.declaring;
+    const std::string log = test::generated_log(dir, truth, "--seed " + std::to_string(d.seed) + " --duration 25 --torque-noise 0.01 --encoder-bits 17",
+                                                kReviewArmImport);
+    auto run = [&](const std::string& model) {
+      DiagnoseOptions o;
+      o.model = model;
+      o.data = log;
+      DiagnoseResult r = diagnose(o, "");
+      std::cout << r.summary;
+      return std::move(r.report);
+    };
+    const nlohmann::json p = run(plain), r = run(declaring);
+    const auto written = written_causes(r);
+    ASSERT_EQ(written.size(), 1u) << r["causes"].dump(1);
+    EXPECT_TRUE(written[0] == "stick_slip" || written[0] == "stribeck") << written[0];
+    EXPECT_LT(r["final"]["rel_error_test_all"].get<double>(), 1.2 * p["final"]["rel_error_test_all"].get<double>())
+        << r["final"].dump() << " against the plain model's " << p["final"].dump();
+  }
+}
+
 // A seventh review's 3-hinge arm with LuGre on its shoulder (fc 0.7, fs 1.4, vs 0.08, sigma0 300;
 // 2 %, 17 bit, the 10 Hz import), diagnosed with the true model: the test split is the last 30 %
 // of the log, and it started in a slow slide where the bristles are far from the steady state
