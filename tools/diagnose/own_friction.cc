@@ -9,10 +9,12 @@
 // without the declaration has `stick_slip` named, 1.47 % held out where the declaring model
 // as given leaves 3.16 %.)
 //
-// So, for a joint whose own level a cause takes over: fits that hold the base parameters at the
-// MJCF's values hold them without that level (returned_levels); `parameters` does not list the
-// level as contradicted (the cause carries it); and every model written with the cause states
-// the level as 0 (with_take_over), which a model written without the cause does not.
+// So, for a joint whose own level a cause takes over: every fit with the cause, the base
+// parameters free or held at the MJCF's values, holds none of that level (its columns zero,
+// its force returned to the targets: base_without_taken, returned_levels), and a stateful
+// candidate is searched that way (level_held); `parameters` does not list the level as
+// contradicted (the cause carries it); and every model written with the cause states the level
+// as 0 (with_take_over), which a model written without the cause does not.
 #include <mujoco/mujoco.h>
 
 #include "diagnosis.h"
