@@ -192,6 +192,12 @@ struct OwnLevel {
   bool any() const { return frictionloss != 0 || declared != 0; }
 };
 
+// The base block and targets of a fit with some causes (own_friction.cc: taken_base).
+struct TakenBase {
+  std::optional<BlockColumns> base;   // the base without the own levels the causes take over (none: fit_.base)
+  Eigen::VectorXd y;                  // the targets, those levels' force returned
+};
+
 // A selection's state (select() makes two and keeps one): the candidates as searched, the
 // causes chosen, what was not tried.
 struct Selection {
@@ -413,6 +419,7 @@ class Diagnosis {
   Eigen::VectorXd returned_levels(const SplitData& s, const std::vector<int>& causes) const;
   bool own_level_parameter(int i, const std::vector<int>& joints) const;
   std::optional<BlockColumns> base_without_taken(const BlockColumns& base, const std::vector<int>& causes) const;
+  TakenBase taken_base(const std::vector<int>& causes) const;
   bool taken_level(int i, const std::vector<int>& causes) const;
   Fit level_held(int k, const Fit& current, const std::vector<int>& chosen) const;
   MjcfEdits with_take_over(const MjcfEdits& e, const MjcfEdits* takers = nullptr) const;

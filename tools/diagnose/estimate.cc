@@ -15,12 +15,10 @@ std::vector<const BlockColumns*> Diagnosis::blocks(const std::vector<int>& cause
 // Held at the MJCF's values or free, the base parameters hold none of the own levels the causes
 // take over (own_friction.cc): their force is returned to the targets.
 Fit Diagnosis::refit(const std::vector<int>& causes, bool base_free, bool robust) const {
-  const Eigen::VectorXd returned = returned_levels(fit_, causes);
-  if (!returned.size()) return fit_blocks(blocks(causes, base_free), fit_.y0, true, robust ? fit_.N : 0);
+  const TakenBase t = taken_base(causes);
   std::vector<const BlockColumns*> with = blocks(causes, base_free);
-  std::optional<BlockColumns> base;   // free, the base parameters still hold no taken level
-  if (base_free && (base = base_without_taken(fit_.base, causes))) with[0] = &*base;
-  return fit_blocks(with, fit_.y0 + returned, true, robust ? fit_.N : 0);
+  if (base_free && t.base) with[0] = &*t.base;   // free, the base parameters still hold no taken level
+  return fit_blocks(with, t.y, true, robust ? fit_.N : 0);
 }
 
 // Residual of a fit on another split (test, cross): the causes' columns evaluated there.

@@ -166,6 +166,15 @@ std::optional<BlockColumns> Diagnosis::base_without_taken(const BlockColumns& ba
   return out;
 }
 
+// The base block and targets of a fit with `causes` on the fit split: fit_'s, or where they
+// take over own levels, the base without those levels (base_without_taken) and their force
+// returned to the targets.
+TakenBase Diagnosis::taken_base(const std::vector<int>& causes) const {
+  TakenBase t{base_without_taken(fit_.base, causes), fit_.y0};
+  if (const Eigen::VectorXd returned = returned_levels(fit_, causes); returned.size()) t.y += returned;
+  return t;
+}
+
 // Is base parameter i the own level of a joint `causes` take over?
 bool Diagnosis::taken_level(int i, const std::vector<int>& causes) const { return own_level_parameter(i, taken_over(causes)); }
 

@@ -388,10 +388,9 @@ void Diagnosis::decide_parameters() {
   for (int k : effects)
     if (cands_[static_cast<size_t>(k)].stateful) keys.push_back(key_columns(cands_[static_cast<size_t>(k)]));
   std::vector<const BlockColumns*> with = blocks(effects, true);
-  const std::optional<BlockColumns> untaken = base_without_taken(fit_.base, effects);   // own_friction.cc
-  if (untaken) with[0] = &*untaken;
-  const Eigen::VectorXd returned = returned_levels(fit_, effects);
-  const Eigen::VectorXd y0 = returned.size() ? Eigen::VectorXd(fit_.y0 + returned) : fit_.y0;
+  const TakenBase taken = taken_base(effects);   // own_friction.cc
+  if (taken.base) with[0] = &*taken.base;
+  const Eigen::VectorXd& y0 = taken.y;
   const size_t unkeyed = with.size();
   for (const BlockColumns& g : keys)
     if (g.cols > 0) with.push_back(&g);
@@ -518,13 +517,11 @@ Fit Diagnosis::iv_refit(const std::vector<int>& causes, const Eigen::VectorXd& m
     return &m;
   };
   // The own levels the causes take over are in no fit with them (own_friction.cc).
-  const std::optional<BlockColumns> base = base_without_taken(fit_.base, causes);
+  const TakenBase taken = taken_base(causes);
   const std::optional<BlockColumns> twin_base = twin_ ? base_without_taken(twin_->base, causes) : std::nullopt;
-  const Eigen::VectorXd returned = returned_levels(fit_, causes);
-  const Eigen::VectorXd y0 = returned.size() ? Eigen::VectorXd(fit_.y0 + returned) : fit_.y0;
   std::vector<const BlockColumns*> F;
-  for (const BlockColumns* b : blocks(causes, true)) F.push_back(use(b == &fit_.base && base ? *base : *b));
-  const Eigen::VectorXd y = masking ? Eigen::VectorXd(y0.cwiseProduct(mask)) : y0;
+  for (const BlockColumns* b : blocks(causes, true)) F.push_back(use(b == &fit_.base && taken.base ? *taken.base : *b));
+  const Eigen::VectorXd y = masking ? Eigen::VectorXd(taken.y.cwiseProduct(mask)) : taken.y;
   if (!twin_) return masking ? fit_blocks(F, y, false, fit_.N) : refit(causes, true, true);
   std::vector<const BlockColumns*> inst{use(twin_base ? *twin_base : twin_->base)};
   for (int c : causes) inst.push_back(use(owned.emplace_back(columns_of(cands_[static_cast<size_t>(c)], *twin_))));
