@@ -543,6 +543,17 @@ void expect_final_not_worse(const nlohmann::json& r) {
   EXPECT_LE(r["final"]["rel_error_test_all"].get<double>(), r["baseline"]["rel_error_test_all"].get<double>() * (1 + 1e-9)) << r["notes"].dump(1);
 }
 
+// report.json of `model` diagnosed on `data` with the default options (20 rollouts), written
+// to `out` (empty: no files); the summary printed.
+nlohmann::json diagnose_model(const std::string& model, const std::string& data, const std::string& out = "") {
+  DiagnoseOptions o;
+  o.model = model;
+  o.data = data;
+  DiagnoseResult r = diagnose(o, out);
+  std::cout << r.summary;
+  return std::move(r.report);
+}
+
 std::vector<std::string> written_causes(const nlohmann::json& r) {
   std::vector<std::string> out;
   for (const auto& c : r["causes"])
@@ -883,15 +894,7 @@ TEST(DiagnoseCases, AFrictionNamedOnAJointTakesOverTheModelsOwnLevel) {
                     lugre = save("true.xml", test::with_declarations(kReviewArm6, {"type=stick_slip joints=elbow fc=0.06 fs=0.12 vs=0.05 sigma0=30 sigma1=1.5 sigma2=0"}));
   const std::string generate = "--seed 32 --duration 25 --torque-noise 0.015 --encoder-bits 17";
   const std::string log = test::generated_log(dir, lugre, generate, kReviewArmImport);
-  auto run = [&](const std::string& model, const std::string& data, const std::string& out) {
-    DiagnoseOptions o;
-    o.model = model;
-    o.data = data;
-    o.rollouts = 20;
-    DiagnoseResult r = diagnose(o, (dir / out).string());
-    std::cout << r.summary;
-    return std::move(r.report);
-  };
+  auto run = [&](const std::string& model, const std::string& data, const std::string& out) { return diagnose_model(model, data, (dir / out).string()); };
   const double reference = run(plain, log, "plain")["final"]["rel_error_test_all"].get<double>();
   struct Own {
     const char* out;
@@ -970,15 +973,7 @@ TEST(DiagnoseCases, ALevelTakenOverIsJudgedAsWrittenAndNotSharedWithTheBase) {
     std::ofstream(declaring) << d.declaring;
     const std::string log = test::generated_log(dir, truth, "--seed " + std::to_string(d.seed) + " --duration 25 --torque-noise 0.01 --encoder-bits 17",
                                                 kReviewArmImport);
-    auto run = [&](const std::string& model) {
-      DiagnoseOptions o;
-      o.model = model;
-      o.data = log;
-      DiagnoseResult r = diagnose(o, "");
-      std::cout << r.summary;
-      return std::move(r.report);
-    };
-    const nlohmann::json p = run(plain), r = run(declaring);
+    const nlohmann::json p = diagnose_model(plain, log), r = diagnose_model(declaring, log);
     const auto written = written_causes(r);
     ASSERT_EQ(written.size(), 1u) << r["causes"].dump(1);
     EXPECT_TRUE(written[0] == "stick_slip" || written[0] == "stribeck") << written[0];
