@@ -2,6 +2,8 @@
 
 #include <mujoco/mujoco.h>
 
+#include <map>
+
 namespace spml {
 
 MjcfEdits identified_model_edits(const MjcfRegressor& reg, const ConsistentIdentification& id, std::vector<std::string>& notes) {
@@ -21,18 +23,15 @@ MjcfEdits identified_model_edits(const MjcfRegressor& reg, const ConsistentIdent
     in.fullinertia = b.identified.fullinertia();
     edits.inertials.push_back(in);
   }
-  // Declared plugins: "plugin:<instance>.<parameter>" -> the instance's parameters as fitted.
+  // Declared plugins: "plugin:<instance>.<parameter>" -> (instance, parameter index, value).
   const auto& insts = reg.effects().instances();
-  std::vector<Eigen::VectorXd> theta(insts.size());
-  std::vector<bool> changed(insts.size(), false);
+  std::map<size_t, std::vector<std::pair<Eigen::Index, double>>> fitted;
   auto plugin_parameter = [&](const std::string& name, double value) {
     for (size_t n = 0; n < insts.size(); ++n) {
       const auto pnames = insts[n].object.param_names();
       for (size_t k = 0; k < pnames.size(); ++k)
         if (name == insts[n].decl.instance + "." + pnames[k]) {
-          if (!theta[n].size()) theta[n] = insts[n].object.params();
-          theta[n][static_cast<Eigen::Index>(k)] = value;
-          changed[n] = true;
+          fitted[n].emplace_back(static_cast<Eigen::Index>(k), value);
           return true;
         }
     }
@@ -49,27 +48,22 @@ MjcfEdits identified_model_edits(const MjcfRegressor& reg, const ConsistentIdent
       notes.push_back(t.name + " = " + std::to_string(t.value) + " (model: " + std::to_string(t.prior) +
                       ") has no MJCF attribute written here: edit it by hand");
   }
-  for (size_t n = 0; n < insts.size(); ++n) {
-    if (!changed[n]) continue;
+  for (const auto& [n, values] : fitted) {
     const auto& d = insts[n].decl;
-    std::vector<int> joints;
-    for (const auto& j : d.joints) joints.push_back(mj_name2id(reg.model(), mjOBJ_JOINT, j.c_str()));
-    std::string config;
+    std::string data;
     try {
-      PluginInstance inst(insts[n].plugin(), reg.model(), joints, d.config, d.element);
-      inst.set_params(theta[n]);
-      config = inst.config_text();
+      data = reg.effects().redeclared(n, [&](Eigen::VectorXd& theta) {
+        for (const auto& [k, v] : values) theta[k] = v;
+      });
     } catch (const PluginError& e) {
       notes.push_back(d.element + ": its identified parameters are refused by the plugin (" + e.what() + "): edit it by hand");
       continue;
     }
-    if (config.empty()) {
+    if (data.empty()) {
       notes.push_back(d.element + ": the plugin cannot write its configuration: its identified parameters are not written, edit it by hand");
       continue;
     }
-    std::string names;
-    for (const auto& j : d.joints) names += (names.empty() ? "" : ",") + j;
-    edits.replaced_texts["spml.plugin." + d.instance] = "type=" + d.type + " joints=" + names + " " + config;
+    edits.replaced_texts["spml.plugin." + d.instance] = data;
   }
   return edits;
 }

@@ -204,13 +204,21 @@ std::string PluginInstance::config_text() const {
   return n < 0 ? "" : std::string(buf.data());
 }
 
+namespace {
+
+std::vector<int> joint_ids(const mjModel* m, const std::vector<std::string>& names) {
+  std::vector<int> out;
+  for (const auto& j : names) out.push_back(mj_name2id(m, mjOBJ_JOINT, j.c_str()));
+  return out;
+}
+
+}  // namespace
+
 ForceEffects::ForceEffects(const mjModel* m, const std::string& source) : m_(m) {
   for (auto& decl : parse_plugin_declarations(m, source)) {
     const std::string where = source + ": " + decl.element;
     const spml_force_plugin& p = load_force_plugin(decl.type, where);
-    std::vector<int> joints;
-    for (auto& j : decl.joints) joints.push_back(mj_name2id(m, mjOBJ_JOINT, j.c_str()));
-    PluginInstance object(p, m, joints, decl.config, where);
+    PluginInstance object(p, m, joint_ids(m, decl.joints), decl.config, where);
     const int np = object.nparam();
     instances_.push_back({std::move(decl), std::move(object), nparam_, np});
     nparam_ += np;
@@ -218,6 +226,25 @@ ForceEffects::ForceEffects(const mjModel* m, const std::string& source) : m_(m) 
 }
 
 ForceEffects::~ForceEffects() { detach(); }
+
+std::string ForceEffects::redeclared(size_t n, const std::function<void(Eigen::VectorXd&)>& set, const std::string& data) const {
+  const Instance& in = instances_.at(n);
+  std::vector<std::pair<std::string, std::string>> config = in.decl.config;
+  if (!data.empty()) {
+    config.clear();
+    for (auto& kv : parse_config_words(data, in.decl.element))
+      if (kv.first != "type" && kv.first != "joints") config.push_back(std::move(kv));
+  }
+  PluginInstance inst(in.plugin(), m_, joint_ids(m_, in.decl.joints), config, in.decl.element);
+  Eigen::VectorXd theta = inst.params();
+  set(theta);
+  inst.set_params(theta);
+  const std::string words = inst.config_text();
+  if (words.empty()) return "";
+  std::string joints;
+  for (const auto& j : in.decl.joints) joints += (joints.empty() ? "" : ",") + j;
+  return "type=" + in.decl.type + " joints=" + joints + " " + words;
+}
 
 void ForceEffects::attach() {
   std::lock_guard<std::mutex> lock(g_write_mutex);

@@ -424,7 +424,6 @@ class Diagnosis {
   Fit level_held(int k, const Fit& current, const std::vector<int>& chosen) const;
   MjcfEdits with_take_over(const MjcfEdits& e, const MjcfEdits* takers = nullptr) const;
   nlohmann::json replaced_friction(int k) const;
-  std::vector<int> joint_ids(const std::vector<std::string>& names) const;
   // unexplained.cc (#22)
   nlohmann::json unexplained_joint(size_t o, const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test, std::ostringstream& csv) const;
   nlohmann::json unexplained(const std::string& out_dir, const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test) const;

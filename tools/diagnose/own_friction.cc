@@ -225,25 +225,14 @@ MjcfEdits Diagnosis::with_take_over(const MjcfEdits& e, const MjcfEdits* takers)
     }
   }
   for (const auto& [n, taken] : zeroed) {
-    const auto& d = insts[n].decl;
-    // Re-identified by `parameters` (identified_model_edits rewrote the text): from those values.
-    std::vector<std::pair<std::string, std::string>> words = d.config;
-    const std::string text_name = "spml.plugin." + d.instance;
-    if (const auto it = out.replaced_texts.find(text_name); it != out.replaced_texts.end()) {
-      words.clear();
-      for (auto& kv : parse_config_words(it->second, d.element))
-        if (kv.first != "type" && kv.first != "joints") words.push_back(std::move(kv));
-    }
-    PluginInstance inst(insts[n].plugin(), reg_->model(), joint_ids(d.joints), words, d.element);
-    Eigen::VectorXd theta = inst.params();
-    for (size_t k = 0; k < taken.size(); ++k)
-      if (taken[k]) theta[static_cast<Eigen::Index>(k)] = 0;
-    inst.set_params(theta);
-    const std::string config = inst.config_text();
-    if (config.empty()) continue;   // the plugin cannot write itself: its text stays as declared
-    std::string joints_text;
-    for (const auto& name : d.joints) joints_text += (joints_text.empty() ? "" : ",") + name;
-    out.replaced_texts[text_name] = "type=" + d.type + " joints=" + joints_text + " " + config;
+    // From the values `parameters` re-identified where identified_model_edits rewrote the text.
+    const std::string text_name = "spml.plugin." + insts[n].decl.instance;
+    const auto it = out.replaced_texts.find(text_name);
+    const std::string data = declared_->redeclared(n, [&](Eigen::VectorXd& theta) {
+      for (size_t k = 0; k < taken.size(); ++k)
+        if (taken[k]) theta[static_cast<Eigen::Index>(k)] = 0;
+    }, it != out.replaced_texts.end() ? it->second : "");
+    if (!data.empty()) out.replaced_texts[text_name] = data;   // empty: the plugin cannot write itself, its text stays as declared
   }
   return out;
 }
@@ -258,12 +247,6 @@ nlohmann::json Diagnosis::replaced_friction(int k) const {
   const auto& insts = declared_->instances();
   for (const auto& [n, p] : L.params) j["spml.plugin." + insts[n].decl.instance][insts[n].object.param_names()[static_cast<size_t>(p)]] = insts[n].object.params()[p];
   return j;
-}
-
-std::vector<int> Diagnosis::joint_ids(const std::vector<std::string>& names) const {
-  std::vector<int> out;
-  for (const auto& n : names) out.push_back(mj_name2id(reg_->model(), mjOBJ_JOINT, n.c_str()));
-  return out;
 }
 
 }  // namespace spml::diagnose_detail

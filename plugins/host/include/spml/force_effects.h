@@ -12,6 +12,7 @@
 
 #include <mujoco/mujoco.h>
 
+#include <functional>
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -140,6 +141,13 @@ class ForceEffects {
   std::vector<std::string> nonlinear_instances() const;
 
   const mjModel* model() const { return m_; }
+
+  // Instance n's declaration written again, its parameters changed by `set` (called with the
+  // values the instance made from its configuration holds: its declared words, or those of
+  // `data`, another <text> data of it, when given): the new <text> data, "type=T joints=a,b
+  // key=value ...", or "" when the plugin cannot write its configuration. Throws PluginError
+  // when the plugin refuses the parameters.
+  std::string redeclared(size_t n, const std::function<void(Eigen::VectorXd&)>& set, const std::string& data = "") const;
 
  private:
   const mjModel* m_;
