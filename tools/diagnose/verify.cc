@@ -106,17 +106,19 @@ std::pair<Eigen::VectorXd, Eigen::VectorXd> Diagnosis::verify(const std::string&
   // rejection the others are fitted again without it.
   bool changed = refit_written_effects(ext_path, edits, notes);
   std::vector<std::string> again;   // the same edit notes as before, not repeated
-  write_scored(ext_path, edits, again);
+  auto scored = write_scored(ext_path, edits, again);
   if (confirm_in_simulation(ext_path, edits)) {
     note_rejections(edits, notes);
     refit_written_effects(ext_path, edits, notes);
     changed = true;
+    scored = write_scored(ext_path, edits, again);
+  } else {
+    // Written again: the rejection trials leave other versions of the model at ext_path (EMPS:
+    // the declaration-free model was the published extended.xml, while `final` scored the
+    // right one); the text and its scores are those of `scored`.
+    write_text_atomic(ext_path, result_.extended_mjcf);
   }
-  // Written again even when nothing changed: the rejection trials and the refit leave other
-  // versions of the model at ext_path (EMPS: the declaration-free model was the published
-  // extended.xml, while `final` scored the right one).
-  const auto rewritten = write_scored(ext_path, edits, again);
-  if (changed) written = rewritten;
+  if (changed) written = std::move(scored);
   // The guard refits the effects with the MJCF's parameters: that model is confirmed in
   // simulation again (an offset fitted beside re-identified mass moments, left alone by them,
   // rolled out 2.35 times worse on every joint of an end-stop draw).
