@@ -21,9 +21,6 @@ std::string pct(double v) { return num(100 * v, 3) + " %"; }
 // of equally good fits: LuGre's fs and vs on a log without break-away were printed with one); a
 // value that extended.xml states otherwise (refitted with the parameters it writes) is shown
 // beside it, and a joint term of `parameters` rejected on its joint says so.
-// A superseded cause: by the later effect named, or, where no single later one holds it,
-// "redundant" in report.json - said in words here ("superseded by redundant" read as if an
-// effect of that name had replaced it).
 // The model's own level a friction takes over (causes[].replaces_model_friction), as one phrase:
 // "frictionloss 0.69" or "spml.plugin.c shoulder.fc 0.69".
 std::string replaced_text(const nlohmann::json& own) {
@@ -36,6 +33,9 @@ std::string replaced_text(const nlohmann::json& own) {
   return out;
 }
 
+// A superseded cause: by the later effect named, or, where no single later one holds it,
+// "redundant" in report.json - said in words here ("superseded by redundant" read as if an
+// effect of that name had replaced it).
 std::string superseded_text(const nlohmann::json& c) {
   const std::string by = c["superseded_by"].get<std::string>();
   return by == "redundant" ? "dropped: not needed beside the other causes" : "superseded by " + by;
