@@ -11,6 +11,7 @@
 // issue's bar, every draw: clean ones name nothing, hidden effects are named exactly.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdlib>
 #include <fstream>
@@ -333,7 +334,9 @@ TEST(RealisticDraws, LuGreMustBeatTheBestStaticFrictionNotCoulombAlone) {
 // ripple as an offset of -14.7 ms; corrected, the data then had `parameters`, the ripple and a
 // band named. Now the causes are chosen on the data as measured too, and the delay stays only
 // when its model wins (there the ripple and band fitted to 17.7 against 6053 on the shifted
-// torques): the ripple alone, no delay.
+// torques): the ripple alone, no delay. Since the joints must agree on a delay, the ripple's
+// joint, asking for -25.5 ms of its own where the others ask -6 to +2, is left out of the search
+// and the rest find 0.1 ms: no delay passes the search at all.
 TEST(RealisticDraws, ADelayThatIsAnotherEffectIsDropped) {
   const auto dir = test::temp_dir("realistic-delay");
   const Draw d = make_draw(0, 6, dir, 2);
@@ -341,7 +344,9 @@ TEST(RealisticDraws, ADelayThatIsAnotherEffectIsDropped) {
   const auto r = diagnose_draw(d, 0, 6, true, dir / "d.h5");
   EXPECT_EQ(named_set(r), d.expected) << r["causes"].dump(1);
   EXPECT_FALSE(r["delay"]["named"].get<bool>()) << r["delay"].dump();
-  EXPECT_NE(r["delay"]["why"].get<std::string>().find("explain them better"), std::string::npos) << r["delay"].dump();
+  const std::string ripple_joint = d.expected.begin()->substr(d.expected.begin()->find('@') + 1);
+  const auto& out = r["delay"]["joints_left_out"];
+  EXPECT_NE(std::find(out.begin(), out.end(), ripple_joint), out.end()) << r["delay"].dump();
 }
 
 // Asymmetric friction holds Coulomb's column and the joint's damping column; Coulomb joins

@@ -174,6 +174,8 @@ struct DelayResult {
   };
   std::vector<Other> other;
   std::string note;                  // the note that says it was corrected
+  std::string disagree;              // the joints' own offsets, where they disagree (estimate_delay)
+  std::vector<std::string> left_out; // joints whose own offset disagreed, left out of the search
 };
 
 struct Cause {
@@ -348,6 +350,7 @@ class Diagnosis {
   void note_rejections(const MjcfEdits& edits, std::vector<std::string>& notes);
   // delay.cc (#22)
   void estimate_delay();
+  std::vector<std::pair<double, double>> offsets_per_output(double d, const std::function<Eigen::VectorXd(double)>& projected) const;
   void delay_decide(double d, const std::function<Eigen::VectorXd(double)>& projected, const std::vector<BlockColumns>& nuis_fit,
                     const Eigen::VectorXd& wf);
   double uniform_step(const SplitData& s) const;
