@@ -985,6 +985,28 @@ TEST(DiagnoseCases, ALevelTakenOverIsJudgedAsWrittenAndNotSharedWithTheBase) {
   }
 }
 
+// The joints' agreement on one delay (delay.cc), on own offsets given in seconds.
+TEST(DiagnoseCases, JointsAgreeOnADelayWithinTheirErrorsOrAMillisecond) {
+  using diagnose_detail::agreeing_outputs;
+  const std::vector<bool> two_of_three{true, false, true};
+  // The eighth review's Stribeck shoulder: the shoulder alone asks for -7 ms.
+  EXPECT_EQ(agreeing_outputs({{-0.35e-3, 0.05e-3}, {-7.0e-3, 0.57e-3}, {-0.75e-3, 0.17e-3}}, 2), two_of_three);
+  // 0.6 ms apart at 4 standard errors: resolved, but within the millisecond a delay is named to.
+  EXPECT_EQ(agreeing_outputs({{4.62e-3, 0.07e-3}, {4.02e-3, 0.12e-3}}, 2), std::vector<bool>(2, true));
+  // 3 ms apart but within their errors (a slow joint's 2 ms standard error).
+  EXPECT_EQ(agreeing_outputs({{5e-3, 0.1e-3}, {2e-3, 2e-3}}, 2), std::vector<bool>(2, true));
+  // Two joints that disagree: no majority to search on.
+  EXPECT_EQ(agreeing_outputs({{5e-3, 0.1e-3}, {-2e-3, 0.1e-3}}, 2), std::vector<bool>(2, false));
+  // A joint that holds no shift (infinite standard error) is never among them, nor counted.
+  EXPECT_EQ(agreeing_outputs({{5e-3, 0.1e-3}, {0, std::numeric_limits<double>::infinity()}, {5.2e-3, 0.1e-3}}, 2), two_of_three);
+  // Forty joints at 5 ms and two that ask for 15 and -9 ms: only those two left out.
+  std::vector<std::pair<double, double>> many(42, {5e-3, 0.2e-3});
+  many[7] = {15e-3, 0.2e-3}, many[33] = {-9e-3, 0.3e-3};
+  std::vector<bool> expected(42, true);
+  expected[7] = expected[33] = false;
+  EXPECT_EQ(agreeing_outputs(many, 22), expected);
+}
+
 // The eighth review's arm with a Stribeck curve on its shoulder (fc 0.5, fs 1.0, vs 0.15; seed
 // 202, 1 %, 17 bit, the 10 Hz import) and no delay: the curve's hump, which the delay search's
 // static friction does not hold, asked for a shift of its own (the shoulder alone -7.0 ms, the

@@ -174,8 +174,10 @@ struct DelayResult {
   };
   std::vector<Other> other;
   std::string note;                  // the note that says it was corrected
-  std::string disagree;              // the joints' own offsets, where they disagree (estimate_delay)
+  std::vector<std::pair<std::string, std::pair<double, double>>> own;   // each joint's own offset and standard error (estimate_delay) ...
+  double own_about = 0;                                                   // ... to first order about this first estimate
   std::vector<std::string> left_out; // joints whose own offset disagreed, left out of the search
+  std::vector<double> output_weight;  // per output: the weight of its rows in the search (empty: 1)
 };
 
 struct Cause {
@@ -258,6 +260,8 @@ double delta_bic(double n, double rss_smaller, double rss_larger, double dk, dou
 // The held-out test: the residual sum of squares falls by at least the fraction min_gain
 // (sums below `floor` count as `floor`).
 bool gains_on_test(double rss_before, double rss_after, double min_gain, double floor);
+// Which outputs' own offsets (seconds, standard error) agree on one delay (delay.cc).
+std::vector<bool> agreeing_outputs(const std::vector<std::pair<double, double>>& own, size_t least);
 
 // The held-out likelihood with one noise variance per joint: the geometric mean over outputs
 // (N rows each) of the residual `after`'s sum of squares relative to `before`'s, each output's
@@ -350,7 +354,8 @@ class Diagnosis {
   void note_rejections(const MjcfEdits& edits, std::vector<std::string>& notes);
   // delay.cc (#22)
   void estimate_delay();
-  std::vector<std::pair<double, double>> offsets_per_output(double d, const std::function<Eigen::VectorXd(double)>& projected) const;
+  std::vector<std::pair<double, double>> offsets_per_output(double d, const std::function<Eigen::VectorXd(double)>& projected,
+                                                            std::vector<double>* sensitivity = nullptr) const;
   void delay_decide(double d, const std::function<Eigen::VectorXd(double)>& projected, const std::vector<BlockColumns>& nuis_fit,
                     const Eigen::VectorXd& wf);
   double uniform_step(const SplitData& s) const;
