@@ -151,7 +151,7 @@ std::vector<BlockColumns> Diagnosis::delay_nuisance(const SplitData& s) const {
 // tick less resolved, and `parameters` named on clean draws on the damping it leaves. The
 // outputs of joints whose own offset disagreed with the others' (estimate_delay) are all out,
 // and each other output's rows weigh by the precision of its own offset (output_weight).
-Eigen::VectorXd Diagnosis::sliding_rows(const SplitData& s) const {
+Eigen::VectorXd Diagnosis::sliding_rows(const SplitData& s, bool weighted) const {
   const auto O = static_cast<Eigen::Index>(out_joint_index_.size());
   Eigen::VectorXd w = Eigen::VectorXd::Ones(s.N * O);
   const double h = uniform_step(s);
@@ -166,7 +166,7 @@ Eigen::VectorXd Diagnosis::sliding_rows(const SplitData& s) const {
       w.segment(o * s.N, s.N).setZero();
       continue;
     }
-    if (static_cast<size_t>(o) < delay_.output_weight.size()) w.segment(o * s.N, s.N).setConstant(delay_.output_weight[static_cast<size_t>(o)]);
+    if (weighted && static_cast<size_t>(o) < delay_.output_weight.size()) w.segment(o * s.N, s.N).setConstant(delay_.output_weight[static_cast<size_t>(o)]);
     if (still_[j]) continue;
     const Eigen::VectorXd v = s.split.X.col(s.cols->qd[j]);
     const double slow = kStickSpeed * std::sqrt(v.squaredNorm() / static_cast<double>(s.N));

@@ -363,7 +363,7 @@ class Diagnosis {
   Eigen::VectorXd net_of_frictionloss(const SplitData& s) const;
   BlockColumns coulomb_nuisance(const SplitData& s) const;
   std::vector<BlockColumns> delay_nuisance(const SplitData& s) const;
-  Eigen::VectorXd sliding_rows(const SplitData& s) const;
+  Eigen::VectorXd sliding_rows(const SplitData& s, bool weighted = true) const;
   BlockColumns offset_column(const SplitData& s) const;
   OffsetBeside offset_beside(const std::vector<int>& stateful, DelayResult& first);
   void choose(const Selection& fresh);
