@@ -212,21 +212,24 @@ std::vector<std::pair<double, double>> Diagnosis::offsets_per_output(double d, c
                                                                       std::vector<double>* sensitivity) const {
   const double eps = 0.05 * uniform_step(fit_);
   const Eigen::VectorXd r = projected(d), J = (projected(d + eps) - projected(d - eps)) / (2 * eps);
+  const Eigen::Index O = r.size() / fit_.N;
+  Eigen::VectorXd JJ(O);
+  for (Eigen::Index o = 0; o < O; ++o) JJ[o] = J.segment(o * fit_.N, fit_.N).squaredNorm();
   std::vector<std::pair<double, double>> out;
-  for (Eigen::Index o = 0; o * fit_.N < r.size(); ++o) {
-    const Eigen::VectorXd Jo = J.segment(o * fit_.N, fit_.N), ro = r.segment(o * fit_.N, fit_.N);
-    const double JJ = Jo.squaredNorm();
-    if (sensitivity) sensitivity->push_back(JJ);
-    if (!(JJ > 0)) {
+  for (Eigen::Index o = 0; o < O; ++o) {
+    if (sensitivity) sensitivity->push_back(JJ[o]);
+    // Rows the search does not weigh (a joint left out) leave rounding only: 1e-20 against 1e4.
+    if (!(JJ[o] > 1e-12 * JJ.maxCoeff())) {
       out.emplace_back(d, std::numeric_limits<double>::infinity());
       continue;
     }
+    const Eigen::VectorXd Jo = J.segment(o * fit_.N, fit_.N), ro = r.segment(o * fit_.N, fit_.N);
     // The score's variance about the output's own offset: its residual at d holds the shift
     // between the two, smooth and large, which the batch means read as noise.
-    const double step = -Jo.dot(ro) / JJ;
+    const double step = -Jo.dot(ro) / JJ[o];
     const Eigen::VectorXd own = ro + step * Jo;
     const Eigen::MatrixXd S = long_run_covariance(Jo.cwiseProduct(own), own, fit_.N);
-    out.emplace_back(d + step, std::sqrt(S(0, 0)) / JJ);
+    out.emplace_back(d + step, std::sqrt(S(0, 0)) / JJ[o]);
   }
   return out;
 }
