@@ -995,6 +995,10 @@ TEST(DiagnoseCases, JointsAgreeOnADelayWithinTheirErrorsOrAMillisecond) {
   EXPECT_EQ(agreeing_outputs({{4.62e-3, 0.07e-3}, {4.02e-3, 0.12e-3}}, 2), std::vector<bool>(2, true));
   // 3 ms apart but within their errors (a slow joint's 2 ms standard error).
   EXPECT_EQ(agreeing_outputs({{5e-3, 0.1e-3}, {2e-3, 2e-3}}, 2), std::vector<bool>(2, true));
+  // Apart by more than a millisecond but by less than a quarter of the larger: a 5 ms and a
+  // 10 ms lag beside a Stribeck hump on one of two joints.
+  EXPECT_EQ(agreeing_outputs({{3.52e-3, 0.29e-3}, {4.55e-3, 0.08e-3}}, 2), std::vector<bool>(2, true));
+  EXPECT_EQ(agreeing_outputs({{8.30e-3, 0.3e-3}, {9.54e-3, 0.08e-3}}, 2), std::vector<bool>(2, true));
   // Two joints that disagree: no majority to search on.
   EXPECT_EQ(agreeing_outputs({{5e-3, 0.1e-3}, {-2e-3, 0.1e-3}}, 2), std::vector<bool>(2, false));
   // A joint that holds no shift (infinite standard error) is never among them, nor counted.
@@ -1005,6 +1009,35 @@ TEST(DiagnoseCases, JointsAgreeOnADelayWithinTheirErrorsOrAMillisecond) {
   std::vector<bool> expected(42, true);
   expected[7] = expected[33] = false;
   EXPECT_EQ(agreeing_outputs(many, 22), expected);
+}
+
+// A log generated as test::generated_log's (DIR/NAME.csv) imported again with its torques
+// `ticks` rows late (row i holds the torque of row i - ticks: a torque logger behind the
+// encoders), as DIR/NAME_late.h5.
+std::string lagged_log(const std::filesystem::path& dir, const std::string& name, int ticks, const std::string& import) {
+  const std::string csv = (dir / (name + ".csv")).string(), late = (dir / (name + "_late.csv")).string(), h5 = (dir / (name + "_late.h5")).string();
+  std::ifstream in(csv);
+  std::ofstream out(late);
+  std::string line;
+  std::getline(in, line);
+  out << line << "\n";
+  const auto first_tau = static_cast<size_t>(std::count(line.begin(), line.begin() + static_cast<std::ptrdiff_t>(line.find("tau:")), ','));
+  std::vector<std::vector<std::string>> rows;
+  while (std::getline(in, line)) {
+    std::vector<std::string> cells;
+    std::stringstream ss(line);
+    for (std::string cell; std::getline(ss, cell, ',');) cells.push_back(cell);
+    rows.push_back(cells);
+  }
+  for (size_t i = 0; i < rows.size(); ++i) {
+    std::vector<std::string> cells = rows[i];
+    for (size_t c = first_tau; c < cells.size(); ++c) cells[c] = rows[i < static_cast<size_t>(ticks) ? 0 : i - static_cast<size_t>(ticks)][c];
+    for (size_t c = 0; c < cells.size(); ++c) out << (c ? "," : "") << cells[c];
+    out << "\n";
+  }
+  out.close();
+  EXPECT_EQ(test::run(test::spml_bin() + " import '" + late + "' " + import + " --out '" + h5 + "' 2>&1").exit_code, 0);
+  return h5;
 }
 
 // The eighth review's arm with a Stribeck curve on its shoulder (fc 0.5, fs 1.0, vs 0.15; seed
@@ -1028,34 +1061,55 @@ TEST(DiagnoseCases, AShiftOnlyOneJointAsksForIsNoDelay) {
   EXPECT_TRUE(r["unexplained"].empty()) << r["unexplained"].dump();
   // The log again, its torques 5 ticks late (1 kHz): `delay` within a millisecond, and the
   // joints as well predicted as on the log without the lag.
-  const std::string csv = (dir / "log.csv").string(), late = (dir / "late.csv").string(), h5 = (dir / "late.h5").string();
-  {
-    std::ifstream in(csv);
-    std::ofstream out(late);
-    std::string line;
-    std::getline(in, line);
-    out << line << "\n";
-    const size_t first_tau = static_cast<size_t>(std::count(line.begin(), line.begin() + static_cast<std::ptrdiff_t>(line.find("tau:")), ','));
-    std::vector<std::vector<std::string>> rows;
-    while (std::getline(in, line)) {
-      std::vector<std::string> cells;
-      std::stringstream ss(line);
-      for (std::string cell; std::getline(ss, cell, ',');) cells.push_back(cell);
-      rows.push_back(cells);
-    }
-    for (size_t i = 0; i < rows.size(); ++i) {
-      std::vector<std::string> cells = rows[i];
-      for (size_t c = first_tau; c < cells.size(); ++c) cells[c] = rows[i < 5 ? 0 : i - 5][c];
-      for (size_t c = 0; c < cells.size(); ++c) out << (c ? "," : "") << cells[c];
-      out << "\n";
-    }
-  }
-  ASSERT_EQ(test::run(test::spml_bin() + " import '" + late + "' " + kReviewArmImport + " --out '" + h5 + "' 2>&1").exit_code, 0);
+  const std::string h5 = lagged_log(dir, "log", 5, kReviewArmImport);
   const nlohmann::json d = diagnose_model(plain, h5);
   ASSERT_TRUE(d["delay"]["named"].get<bool>()) << d["delay"].dump();
   EXPECT_NEAR(d["delay"]["seconds"].get<double>(), 5e-3, 1e-3);
   for (const char* j : {"yaw", "elbow"})
     EXPECT_LT(d["final"]["rel_error_test"][j].get<double>(), 1.1 * r["final"]["rel_error_test"][j].get<double>()) << j << " " << d["final"].dump();
+}
+
+// A ninth review's 2-joint arm with a Stribeck hump on its first joint (fc 1, fs 2, vs 0.1;
+// seed 6, 1 %, 17 bit, the 10 Hz import), the torques 5 and 10 ms late. With 1 ms as the only
+// margin of agreement the joints' own offsets (3.52 +- 0.29 and 4.55 +- 0.08 ms at 5 ms; 8.30
+// and 9.54 at 10) had no majority and the lag was lost (the clean joint 1.18 and 2.46 % held
+// out where 0.19 % without a lag). Now a quarter of the larger offset is within agreement too:
+// both are named and corrected, the clean joint's held-out error less than half of what the
+// lag leaves (0.29 and 0.36 %). The pooled estimate is still pulled by the hump (3.62 and
+// 8.42 ms; at 2 ms +0.74, not named): README, known wrong answers.
+TEST(DiagnoseCases, ALagBesideAnEffectOnOneOfTwoJointsIsNamed) {
+  const std::string arm = R"(<mujoco model="rev_arm2">
+  <compiler angle="radian" inertiafromgeom="false"/>
+  <option timestep="0.0005" gravity="0 0 -9.81">
+    <flag contact="disable"/>
+  </option>
+  <worldbody>
+    <body name="l1" pos="0 0 0">
+      <joint name="j1" type="hinge" axis="0 -1 0" armature="0.5" damping="3.0"/>
+      <inertial pos="0.3 0 0" mass="4" diaginertia="0.01 0.13 0.13"/>
+      <body name="l2" pos="0.6 0 0">
+        <joint name="j2" type="hinge" axis="0 -1 0" armature="0.2" damping="1.0"/>
+        <inertial pos="0.25 0 0" mass="1.5" diaginertia="0.003 0.035 0.035"/>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+)";
+  const auto dir = test::temp_dir("dc-delay-two");
+  const std::string truth = (dir / "true.xml").string(), plain = (dir / "plain.xml").string();
+  std::ofstream(truth) << test::with_declarations(arm, {"type=stribeck joints=j1 fc=1.0 fs=2.0 vs=0.1"});
+  std::ofstream(plain) << arm;
+  const std::string import = "--t t --x 'q:j1,q:j2' --y 'tau:j1,tau:j2' --lowpass 10 --derive --drop-edges 612 --decimate 5";
+  const nlohmann::json r = diagnose_model(plain, test::generated_log(dir, truth, "--seed 6 --duration 25 --torque-noise 0.01 --encoder-bits 17", import));
+  EXPECT_FALSE(r["delay"]["named"].get<bool>()) << r["delay"].dump();
+  for (int lag : {5, 10}) {
+    SCOPED_TRACE(lag);
+    const nlohmann::json d = diagnose_model(plain, lagged_log(dir, "log", lag, import));
+    ASSERT_TRUE(d["delay"]["named"].get<bool>()) << d["delay"].dump();
+    EXPECT_GT(d["delay"]["seconds"].get<double>(), 0.5e-3 * lag);   // a lag, pulled below the truth (above)
+    EXPECT_LT(d["delay"]["seconds"].get<double>(), 1e-3 * lag);
+    EXPECT_LT(d["final"]["rel_error_test"]["j2"].get<double>(), 0.5 * d["baseline"]["rel_error_test"]["j2"].get<double>()) << d["final"].dump();
+  }
 }
 
 // A seventh review's 3-hinge arm with LuGre on its shoulder (fc 0.7, fs 1.4, vs 0.08, sigma0 300;

@@ -149,9 +149,8 @@ std::vector<BlockColumns> Diagnosis::delay_nuisance(const SplitData& s) const {
 // into its neighbours (20 ms at 10 Hz), two samples where no filter is known. Half a period, or
 // 0.05 of the RMS speed, cost precision at the reversals, where |qdd| peaks: the logger's half
 // tick less resolved, and `parameters` named on clean draws on the damping it leaves. The
-// outputs of joints whose own offset disagreed with the others' (estimate_delay) are all out,
-// and each other output's rows weigh by the precision of its own offset (output_weight).
-Eigen::VectorXd Diagnosis::sliding_rows(const SplitData& s, bool weighted) const {
+// outputs of joints whose own offset disagreed with the others' (estimate_delay) are all out.
+Eigen::VectorXd Diagnosis::sliding_rows(const SplitData& s) const {
   const auto O = static_cast<Eigen::Index>(out_joint_index_.size());
   Eigen::VectorXd w = Eigen::VectorXd::Ones(s.N * O);
   const double h = uniform_step(s);
@@ -166,7 +165,6 @@ Eigen::VectorXd Diagnosis::sliding_rows(const SplitData& s, bool weighted) const
       w.segment(o * s.N, s.N).setZero();
       continue;
     }
-    if (weighted && static_cast<size_t>(o) < delay_.output_weight.size()) w.segment(o * s.N, s.N).setConstant(delay_.output_weight[static_cast<size_t>(o)]);
     if (still_[j]) continue;
     const Eigen::VectorXd v = s.split.X.col(s.cols->qd[j]);
     const double slow = kStickSpeed * std::sqrt(v.squaredNorm() / static_cast<double>(s.N));
@@ -395,27 +393,6 @@ void Diagnosis::estimate_delay() {
     const double mean = inverse_variance_mean(own, keep).first;
     w = sliding_rows(fit_);
     best = search(mean, std::max(5e-3, std::fabs(mean - best)));
-  }
-  // The offset the joints agree on, each joint weighed by the precision of its own offset:
-  // its rows scaled so that the weighted search's minimum is, to first order, the inverse-
-  // variance mean of the joints' own offsets (the weight squared 1 / (se^2 JJ), JJ the rows'
-  // sensitivity to a shift), and searched again about that mean; the evidence and the held-out
-  // test on the same weighted rows (sliding_rows). The pooled fit weighs a joint by its torques'
-  // sensitivity alone, whatever its residual: a joint with an effect the nuisance does not hold,
-  // its own offset too loose to disagree, pulled a review's 5 ms lag to 3.25 +- 0.62 ms (the
-  // two clean joints 4.6 +- 0.1 each).
-  std::vector<double> JJ;
-  own = offsets_per_output(best, projected, &JJ);
-  if (informed_outputs(own) >= 2) {
-    delay_.output_weight.assign(own.size(), 1.0);
-    double top = 0;
-    for (size_t o = 0; o < own.size(); ++o)
-      if (std::isfinite(own[o].second) && own[o].second > 0 && JJ[o] > 0) top = std::max(top, delay_.output_weight[o] = 1 / (own[o].second * std::sqrt(JJ[o])));
-    for (size_t o = 0; o < own.size(); ++o)
-      if (std::isfinite(own[o].second) && own[o].second > 0 && JJ[o] > 0) delay_.output_weight[o] /= top;
-    const double mean = inverse_variance_mean(own, std::vector<bool>(own.size(), true)).first;
-    w = sliding_rows(fit_);
-    if (std::isfinite(mean)) best = search(mean, std::max(5e-3, std::fabs(mean - best)));
   }
   delay_decide(best, projected, nuisance, w);
   if (!delay_.left_out.empty()) {

@@ -177,7 +177,6 @@ struct DelayResult {
   std::vector<std::pair<std::string, std::pair<double, double>>> own;   // each joint's own offset and standard error (estimate_delay) ...
   double own_about = 0;                                                   // ... to first order about this first estimate
   std::vector<std::string> left_out; // joints whose own offset disagreed, left out of the search
-  std::vector<double> output_weight;  // per output: the weight of its rows in the search (empty: 1)
 };
 
 struct Cause {
@@ -363,7 +362,7 @@ class Diagnosis {
   Eigen::VectorXd net_of_frictionloss(const SplitData& s) const;
   BlockColumns coulomb_nuisance(const SplitData& s) const;
   std::vector<BlockColumns> delay_nuisance(const SplitData& s) const;
-  Eigen::VectorXd sliding_rows(const SplitData& s, bool weighted = true) const;
+  Eigen::VectorXd sliding_rows(const SplitData& s) const;
   BlockColumns offset_column(const SplitData& s) const;
   OffsetBeside offset_beside(const std::vector<int>& stateful, DelayResult& first);
   void choose(const Selection& fresh);

@@ -148,11 +148,7 @@ void Diagnosis::select() {
 void Diagnosis::choose(const Selection& fresh) {
   forward_backward();
   if (!delay_.named) return;
-  // Every joint the search kept counts alike here, not by the precision of its own offset:
-  // weighed so, the clean yaw of a review log with a 5 ms lag dominated, and the causes chosen
-  // on the data as measured, whose free damping absorbs most of a slow shift, came within the
-  // bars (the lag given up, 0.069 against 0.060 held out).
-  const Eigen::VectorXd wf = sliding_rows(fit_, false), wt = sliding_rows(test_, false);   // of the velocities: the same on both sides
+  const Eigen::VectorXd wf = sliding_rows(fit_), wt = sliding_rows(test_);   // of the velocities: the same on both sides
   const std::vector<int> kept_a = kept_effects();
   const Fit fa = refit(kept_a, true);
   const Eigen::VectorXd ra = fa.residual.cwiseProduct(wf);
