@@ -206,8 +206,7 @@ std::vector<const BlockColumns*> pointers(const std::vector<BlockColumns>& v) {
 // step its rows alone would take from d, with its autocorrelation-robust standard error
 // (infinite where the rows the search weighs hold nothing of a shift). `projected`: the
 // stacked residual of the search at an offset.
-std::vector<std::pair<double, double>> Diagnosis::offsets_per_output(double d, const std::function<Eigen::VectorXd(double)>& projected,
-                                                                      std::vector<double>* sensitivity) const {
+std::vector<std::pair<double, double>> Diagnosis::offsets_per_output(double d, const std::function<Eigen::VectorXd(double)>& projected) const {
   const double eps = 0.05 * uniform_step(fit_);
   const Eigen::VectorXd r = projected(d), J = (projected(d + eps) - projected(d - eps)) / (2 * eps);
   const Eigen::Index O = r.size() / fit_.N;
@@ -215,7 +214,6 @@ std::vector<std::pair<double, double>> Diagnosis::offsets_per_output(double d, c
   for (Eigen::Index o = 0; o < O; ++o) JJ[o] = J.segment(o * fit_.N, fit_.N).squaredNorm();
   std::vector<std::pair<double, double>> out;
   for (Eigen::Index o = 0; o < O; ++o) {
-    if (sensitivity) sensitivity->push_back(JJ[o]);
     // Rows the search does not weigh (a joint left out) leave rounding only: 1e-20 against 1e4.
     if (!(JJ[o] > 1e-12 * JJ.maxCoeff())) {
       out.emplace_back(d, std::numeric_limits<double>::infinity());

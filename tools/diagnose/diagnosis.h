@@ -353,8 +353,7 @@ class Diagnosis {
   void note_rejections(const MjcfEdits& edits, std::vector<std::string>& notes);
   // delay.cc (#22)
   void estimate_delay();
-  std::vector<std::pair<double, double>> offsets_per_output(double d, const std::function<Eigen::VectorXd(double)>& projected,
-                                                            std::vector<double>* sensitivity = nullptr) const;
+  std::vector<std::pair<double, double>> offsets_per_output(double d, const std::function<Eigen::VectorXd(double)>& projected) const;
   void delay_decide(double d, const std::function<Eigen::VectorXd(double)>& projected, const std::vector<BlockColumns>& nuis_fit,
                     const Eigen::VectorXd& wf);
   double uniform_step(const SplitData& s) const;
