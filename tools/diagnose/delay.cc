@@ -202,13 +202,18 @@ std::vector<const BlockColumns*> pointers(const std::vector<BlockColumns>& v) {
 }
 }  // namespace
 
-// Each output's own offset, to first order about the common estimate d: the Gauss-Newton
-// step its rows alone would take from d, with its autocorrelation-robust standard error
-// (infinite where the rows the search weighs hold nothing of a shift). `projected`: the
-// stacked residual of the search at an offset.
-std::vector<std::pair<double, double>> Diagnosis::offsets_per_output(double d, const std::function<Eigen::VectorXd(double)>& projected) const {
+// The search's stacked residual at d and its derivative with respect to d (central
+// differences of 0.05 samples). `projected`: the stacked residual of the search at an offset.
+ShiftSlope Diagnosis::shift_slope(double d, const std::function<Eigen::VectorXd(double)>& projected) const {
   const double eps = 0.05 * uniform_step(fit_);
-  const Eigen::VectorXd r = projected(d), J = (projected(d + eps) - projected(d - eps)) / (2 * eps);
+  return {projected(d), (projected(d + eps) - projected(d - eps)) / (2 * eps)};
+}
+
+// Each output's own offset, to first order about the common estimate d (`at`: the slope
+// there): the Gauss-Newton step its rows alone would take from d, with its autocorrelation-
+// robust standard error (infinite where the rows the search weighs hold nothing of a shift).
+std::vector<std::pair<double, double>> Diagnosis::offsets_per_output(double d, const ShiftSlope& at) const {
+  const Eigen::VectorXd &r = at.r, &J = at.J;
   const Eigen::Index O = r.size() / fit_.N;
   Eigen::VectorXd JJ(O);
   for (Eigen::Index o = 0; o < O; ++o) JJ[o] = J.segment(o * fit_.N, fit_.N).squaredNorm();
@@ -230,6 +235,21 @@ std::vector<std::pair<double, double>> Diagnosis::offsets_per_output(double d, c
   return out;
 }
 
+namespace {
+// The inverse-variance mean of the offsets in `keep` with a finite standard error, and its
+// standard error (NaN and infinity when there is none).
+std::pair<double, double> inverse_variance_mean(const std::vector<std::pair<double, double>>& own, const std::vector<bool>& keep) {
+  double sw = 0, swd = 0;
+  for (size_t o = 0; o < own.size(); ++o)
+    if (keep[o] && std::isfinite(own[o].second) && own[o].second > 0) sw += 1 / (own[o].second * own[o].second), swd += own[o].first / (own[o].second * own[o].second);
+  return sw > 0 ? std::pair{swd / sw, 1 / std::sqrt(sw)} : std::pair{std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity()};
+}
+
+size_t informed_outputs(const std::vector<std::pair<double, double>>& own) {
+  return static_cast<size_t>(std::count_if(own.begin(), own.end(), [](const auto& x) { return std::isfinite(x.second); }));
+}
+}  // namespace
+
 // The outputs whose own offsets agree: no pair apart by more than the familywise bound at
 // kDisagree, nor by more than kMinDelay or a quarter of the larger (a review log with a true
 // delay of 5 ms had the yaw at 4.62 +- 0.07 ms and the elbow at 4.02 +- 0.12: the model's small
@@ -246,18 +266,20 @@ std::vector<bool> agreeing_outputs(const std::vector<std::pair<double, double>>&
     if (std::isfinite(own[o].second)) set.push_back(o);
   const size_t n = set.size();
   const double z = familywise_z(kDisagree, static_cast<int>(std::max<size_t>(n * (n - 1) / 2, 1)));
-  // (pairs that disagree, chi-square about the weighted mean) of a set of outputs.
+  // (pairs that disagree, chi-square about the inverse-variance mean) of a set of outputs.
   auto disagreement = [&](const std::vector<size_t>& v) {
     int apart = 0;
-    double sw = 0, swd = 0, chi2 = 0;
+    std::vector<bool> in(own.size(), false);
     for (size_t a = 0; a < v.size(); ++a) {
       const auto& x = own[v[a]];
       for (size_t b = a + 1; b < v.size(); ++b)
         apart += std::fabs(x.first - own[v[b]].first) >
                  std::max({z * std::hypot(x.second, own[v[b]].second), kMinDelay, kDisagreeShare * std::max(std::fabs(x.first), std::fabs(own[v[b]].first))});
-      sw += 1 / (x.second * x.second), swd += x.first / (x.second * x.second);
+      in[v[a]] = true;
     }
-    for (size_t o : v) chi2 += std::pow((own[o].first - swd / sw) / own[o].second, 2);
+    const double mean = inverse_variance_mean(own, in).first;
+    double chi2 = 0;
+    for (size_t o : v) chi2 += std::pow((own[o].first - mean) / own[o].second, 2);
     return std::pair{apart, chi2};
   };
   while (disagreement(set).first > 0) {
@@ -279,20 +301,6 @@ std::vector<bool> agreeing_outputs(const std::vector<std::pair<double, double>>&
   return keep;
 }
 
-namespace {
-// The inverse-variance mean of the offsets in `keep` with a finite standard error, and its
-// standard error (NaN and infinity when there is none).
-std::pair<double, double> inverse_variance_mean(const std::vector<std::pair<double, double>>& own, const std::vector<bool>& keep) {
-  double sw = 0, swd = 0;
-  for (size_t o = 0; o < own.size(); ++o)
-    if (keep[o] && std::isfinite(own[o].second) && own[o].second > 0) sw += 1 / (own[o].second * own[o].second), swd += own[o].first / (own[o].second * own[o].second);
-  return sw > 0 ? std::pair{swd / sw, 1 / std::sqrt(sw)} : std::pair{std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity()};
-}
-
-size_t informed_outputs(const std::vector<std::pair<double, double>>& own) {
-  return static_cast<size_t>(std::count_if(own.begin(), own.end(), [](const auto& x) { return std::isfinite(x.second); }));
-}
-}  // namespace
 
 // The search: residual sum of squares after projecting out the base parameters and the
 // nuisance columns, as a function of d. A delay is one shift of every torque against every
@@ -358,7 +366,8 @@ void Diagnosis::estimate_delay() {
   // the joints that hold a shift - or too few are left.
   double best = search(0, delay_.range);
   const double d_first = best;
-  const auto first = offsets_per_output(best, projected);
+  ShiftSlope slope = shift_slope(best, projected);   // at `best`: the own offsets', and then delay_decide's
+  const auto first = offsets_per_output(best, slope);
   delay_.own_about = d_first;
   for (size_t o = 0; o < first.size(); ++o)
     if (std::isfinite(first[o].second)) delay_.own.emplace_back(out_joints_[o], first[o]);
@@ -370,7 +379,7 @@ void Diagnosis::estimate_delay() {
   };
   std::vector<std::pair<double, double>> own = first;
   for (int round = 0;; ++round) {
-    if (round > 0) own = offsets_per_output(best, projected);
+    if (round > 0) own = offsets_per_output(best, slope = shift_slope(best, projected));
     const std::vector<bool> keep = agreeing_outputs(own, least);
     const auto kept = static_cast<size_t>(std::count(keep.begin(), keep.end(), true));
     if (kept == informed_outputs(own)) break;
@@ -392,7 +401,7 @@ void Diagnosis::estimate_delay() {
     w = sliding_rows(fit_);
     best = search(mean, std::max(5e-3, std::fabs(mean - best)));
   }
-  delay_decide(best, projected, nuisance, w);
+  delay_decide(best, slope, projected, nuisance, w);
   if (!delay_.left_out.empty()) {
     std::string names;
     for (const auto& j : delay_.left_out) names += (names.empty() ? "" : ", ") + j;
@@ -403,14 +412,13 @@ void Diagnosis::estimate_delay() {
 // Standard error (Gauss-Newton, autocorrelation-robust), evidence and the held-out test; then
 // the correction of every split when `delay` is named. `nuis_fit` and `wf`: the search's nuisance
 // and row weights on the fit split.
-void Diagnosis::delay_decide(double d, const std::function<Eigen::VectorXd(double)>& projected, const std::vector<BlockColumns>& nuis_fit,
-                             const Eigen::VectorXd& wf) {
-  const double h = uniform_step(fit_), eps = 0.05 * h;
-  const Eigen::VectorXd r = projected(d), r0 = projected(0);
-  const Eigen::VectorXd J = (projected(d + eps) - projected(d - eps)) / (2 * eps);
+void Diagnosis::delay_decide(double d, const ShiftSlope& at, const std::function<Eigen::VectorXd(double)>& projected,
+                             const std::vector<BlockColumns>& nuis_fit, const Eigen::VectorXd& wf) {
+  const double h = uniform_step(fit_);
+  const Eigen::VectorXd &r = at.r, &J = at.J, r0 = projected(0);
   const double JJ = J.squaredNorm();
   const Eigen::MatrixXd S = long_run_covariance(J.cwiseProduct(r), r, fit_.N);
-  const auto n = static_cast<double>((wf.array() != 0).count());   // the rows the search weighed
+  const double n = wf.sum();   // the rows the search weighed
   int rank = fit_.base.cols;
   for (const auto& b : nuis_fit) rank += b.cols;
   delay_.seconds = d;

@@ -179,6 +179,11 @@ struct DelayResult {
   std::vector<std::string> left_out; // joints whose own offset disagreed, left out of the search
 };
 
+// The delay search's stacked residual at an offset and its derivative there (delay.cc).
+struct ShiftSlope {
+  Eigen::VectorXd r, J;
+};
+
 struct Cause {
   int candidate;
   double delta_bic;
@@ -353,9 +358,10 @@ class Diagnosis {
   void note_rejections(const MjcfEdits& edits, std::vector<std::string>& notes);
   // delay.cc (#22)
   void estimate_delay();
-  std::vector<std::pair<double, double>> offsets_per_output(double d, const std::function<Eigen::VectorXd(double)>& projected) const;
-  void delay_decide(double d, const std::function<Eigen::VectorXd(double)>& projected, const std::vector<BlockColumns>& nuis_fit,
-                    const Eigen::VectorXd& wf);
+  ShiftSlope shift_slope(double d, const std::function<Eigen::VectorXd(double)>& projected) const;
+  std::vector<std::pair<double, double>> offsets_per_output(double d, const ShiftSlope& at) const;
+  void delay_decide(double d, const ShiftSlope& at, const std::function<Eigen::VectorXd(double)>& projected,
+                    const std::vector<BlockColumns>& nuis_fit, const Eigen::VectorXd& wf);
   double uniform_step(const SplitData& s) const;
   Eigen::VectorXd targets_at(const SplitData& s, double d) const;
   Eigen::VectorXd net_of_frictionloss(const SplitData& s) const;

@@ -158,7 +158,7 @@ void Diagnosis::choose(const Selection& fresh) {
   const std::vector<int> kept_b = kept_effects();
   const Fit fb = refit(kept_b, true);
   const double test_b = residual_on(test_, kept_b, true, fb).cwiseProduct(wt).squaredNorm();
-  const double n_eff = static_cast<double>((wf.array() != 0).count()) * effective_fraction(ra, fit_.N);
+  const double n_eff = wf.sum() * effective_fraction(ra, fit_.N);
   const bool delay_wins = delta_bic(n_eff, fb.residual.cwiseProduct(wf).squaredNorm(), ra.squaredNorm(), k_a - free_parameters(kept_b, fb),
                                     rss_floor(fit_.b)) > opt_.bic_threshold &&
                           gains_on_test(test_b, test_a, std::max(opt_.min_gain, kMinDelayGain), rss_floor(test_.b));
