@@ -149,6 +149,14 @@ TEST(CheckPlugin, RefusesHiddenStateThatAppearsLate) {
   EXPECT_TRUE(has(r.output, "without advance (hidden state): dof 0: after 500 calls")) << r.output;
 }
 
+// Instances that share their gain through a global (every create overwrites it) while the
+// library flags them SPML_FORCE_INDEPENDENT (ABI revision 1): right while one instance lives,
+// wrong for diagnose's threads, which walk several at once.
+TEST(CheckPlugin, RefusesInstancesThatShareStateWhileFlaggedIndependent) {
+  expect_only_failure("force_shared", "broken_viscous independent");
+  EXPECT_TRUE(has(check(broken("force_shared")).output, "stepped in turn with the other")) << check(broken("force_shared")).output;
+}
+
 // Hidden state shows in every clause that calls compute twice; the one it breaks is named.
 TEST(CheckPlugin, RefusesHiddenStateInAPluginDeclaringNone) {
   const auto r = check(broken("force_hidden_state"));
@@ -255,7 +263,8 @@ TEST(CheckPlugin, LibraryApiReportsEveryClause) {
   std::vector<std::string> names;
   for (const auto& c : r.clauses) names.push_back(c.name);
   for (const char* clause : {"abi-version", "names", "shape-params", "callbacks", "key-table", "create", "finite-force",
-                             "no-hidden-state", "own-dofs", "regressor", "params-roundtrip", "write-config", "reset"})
+                             "no-hidden-state", "own-dofs", "regressor", "params-roundtrip", "write-config", "reset",
+                             "independent"})
     EXPECT_TRUE(contains(names, clause)) << clause;
 }
 

@@ -164,6 +164,7 @@ Draw make_draw(int index, std::mt19937_64& rng, const std::filesystem::path& dir
 }
 
 TEST(Diagnose, NamesExactlyWhatWasHidden) {
+  SPML_SKIP_UNDER_SANITIZERS();
   const auto dir = test::temp_dir("diagnose-hidden");
   std::map<std::string, std::map<std::string, int>> confusion;
   int failures = 0;
@@ -285,6 +286,7 @@ TEST(Diagnose, EmpsExampleReproducesThePublishedModels) {
 // The Panda: the shipped armature/damping are contradicted on every joint, every joint's
 // held-out error falls, joint 7 below 30 %.
 TEST(Diagnose, PandaExampleFindsTheDefaultsAndTheFriction) {
+  SPML_SKIP_UNDER_SANITIZERS();
   const std::string model = shared_data() + "/panda/panda_nohand.xml";
   if (!std::filesystem::exists(model)) GTEST_SKIP() << "Panda data not found at " << model << " (set SPML_SHARED_DATA)";
   const auto dir = test::temp_dir("diagnose-panda");

@@ -81,6 +81,7 @@ Dataset realistic_data(const std::string& true_path, const std::vector<std::stri
 }
 
 TEST(DiagnoseRealistic, CleanDrawsNameNothingAndFilteredCoulombIsCoulomb) {
+  SPML_SKIP_UNDER_SANITIZERS();
   const auto dir = test::temp_dir("diagnose-realistic");
   const std::vector<Realistic> cases = {{"clean lowpass", true, ""}, {"clean lowpass", true, ""}, {"clean lowpass", true, ""},
                                         {"clean lowpass", true, ""}, {"clean raw", false, ""},    {"clean raw", false, ""},

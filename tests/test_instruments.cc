@@ -96,6 +96,7 @@ TEST(Instruments, InstrumentalVariablesUndoTheShrinkageOfNoisyAccelerations) {
 // MJCF (one base parameter, -2 %, at 3.5 robust standard errors; the held-out guard keeps it
 // out of extended.xml), where least squares lists six, the shoulder inertia at half its value.
 TEST(Instruments, DiagnoseJudgesTheMjcfByInstrumentalVariables) {
+  SPML_SKIP_UNDER_SANITIZERS();
   const std::string model = mjcf_path("planar_arm3.xml");
   const auto dir = test::temp_dir("instruments_diagnose");
   const std::string data = (dir / "raw.h5").string();

@@ -251,6 +251,7 @@ TEST(Bench, ToyReproducesThePapersRegime) {
 }
 
 TEST(Bench, SimDynLocalBandSpgpBeatsLls) {
+  SPML_SKIP_UNDER_SANITIZERS();
   BenchOptions o;
   o.data = scenario_file("simdyn-ll");
   o.learners = {"LLS", "SPGP"};
@@ -278,6 +279,7 @@ TEST(Bench, SimDynLocalBandSpgpBeatsLls) {
 // and the sparse learner beside it.
 // Before the kernel-first start, SPGP extrapolated at 252 Nm on joint 0 here (LLS 35).
 TEST(Bench, SimDynFullDataSpgpExtrapolatesBelowLls) {
+  SPML_SKIP_UNDER_SANITIZERS();
   BenchOptions o;
   o.data = scenario_file("simdyn-ll");
   o.learners = {"LLS", "SPGP", "SPGP-Sparse"};

@@ -272,3 +272,24 @@ TEST(ForcePlugins, AbiMismatchIsRejected) {
   std::string err = error_of(decl("w", "type=wrong_abi joints=a"));
   EXPECT_NE(err.find("spml_force_wrong_abi.so: force plugin ABI version 99, this spml speaks version 3"), std::string::npos) << err;
 }
+
+// A library built before ABI revision 1 (no spml_force_plugin_abi_revision, entries that end at
+// write_config, two of them back to back) loads and computes as before, and the host reads no
+// flags from it, so diagnose runs its plugins on one thread: the bytes after the first entry's
+// write_config are the second entry's ABI version, 3, whose low bit is SPML_FORCE_INDEPENDENT.
+// spml check-plugin passes it with the `independent` clause skipped.
+TEST(ForcePlugins, ARevisionZeroLibraryRunsOnOneThread) {
+  force_plugins().add(SPML_TEST_PLUGIN_R0);
+  const spml_force_plugin& first = load_force_plugin("old_viscous");
+  ASSERT_NE(first.flags & SPML_FORCE_INDEPENDENT, 0u) << "the fixture must lay its entries back to back";
+  for (const char* name : {"old_viscous", "old_viscous_too"}) {
+    EXPECT_EQ(force_plugins().revision_of(name), 0) << name;
+    EXPECT_EQ(force_plugin_flags(load_force_plugin(name)), 0u) << name;
+  }
+  EXPECT_EQ(force_plugin_flags(load_force_plugin("viscous")), SPML_FORCE_INDEPENDENT) << "the shipped effects are revision 1";
+  Loaded l(decl("old", "type=old_viscous_too joints=b fv=0.5"));
+  EXPECT_DOUBLE_EQ(l.force(0.1, 0.2, 3.0, 2.0)[1], -1.0);
+  const auto r = test::run(std::string(SPML_BIN) + " check-plugin " + SPML_TEST_PLUGIN_R0);
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("SKIP  old_viscous_too  independent: not flagged SPML_FORCE_INDEPENDENT"), std::string::npos) << r.output;
+}

@@ -289,6 +289,7 @@ TEST(RealisticDraws, ConfusionTable) {
 // five times the band, but the model's error 99 % on every joint without the effect: the
 // low-pass is detected from the error, and without it `coulomb` was named (fc 0.33 +- 0.015).
 TEST(RealisticDraws, StribeckIsSearchedInsideItsForm) {
+  SPML_SKIP_UNDER_SANITIZERS();
   const auto dir = test::temp_dir("realistic-stribeck");
   const Draw d = make_draw(0, 4, dir, 0);
   ASSERT_EQ(d.hidden, "stribeck");

@@ -15,6 +15,15 @@
 #include <sstream>
 #include <string>
 
+// Under the sanitizers (the asan preset: ASan + UBSan, several times slower) the longest
+// end-to-end cases are skipped, and say so: each runs the code of the shorter ones on more
+// data, and the main suite runs them all (README, "checking memory safety").
+#ifdef SPML_SANITIZED
+#define SPML_SKIP_UNDER_SANITIZERS() GTEST_SKIP() << "a long end-to-end case: run by the main suite, not under the sanitizers"
+#else
+#define SPML_SKIP_UNDER_SANITIZERS() static_cast<void>(0)
+#endif
+
 namespace spml::test {
 
 // A fresh folder for this test process (its pid in the name), removed when the process

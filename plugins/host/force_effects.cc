@@ -120,6 +120,14 @@ std::vector<std::string> available_force_plugins() {
   return names;
 }
 
+uint32_t force_plugin_flags(const spml_force_plugin& plugin, int revision) { return revision >= 1 ? plugin.flags : 0u; }
+
+uint32_t force_plugin_flags(const spml_force_plugin& plugin) {
+  const PluginCatalog& catalog = force_plugins();
+  if (catalog.find(plugin.name) != &plugin) return 0;
+  return force_plugin_flags(plugin, catalog.revision_of(plugin.name));
+}
+
 const spml_force_plugin& load_force_plugin(const std::string& type, const std::string& element) {
   const PluginCatalog& catalog = force_plugins();
   if (const void* p = catalog.find(type)) return *static_cast<const spml_force_plugin*>(p);

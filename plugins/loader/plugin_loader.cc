@@ -55,6 +55,9 @@ PluginLibrary::PluginLibrary(const std::string& file, const PluginKind& kind) : 
       }
       entries_.push_back(e);
     }
+  if (problem.empty())
+    if (auto revision = reinterpret_cast<int32_t (*)()>(dlsym(handle_, (kind.prefix + "_abi_revision").c_str())))
+      revision_ = std::max(0, static_cast<int>(revision()));
   if (!problem.empty()) {
     dlclose(handle_);
     handle_ = nullptr;
@@ -133,6 +136,11 @@ const void* PluginCatalog::find(const std::string& name) const {
 std::string PluginCatalog::file_of(const std::string& name) const {
   auto it = entries_.find(name);
   return it == entries_.end() ? "" : it->second.second->file();
+}
+
+int PluginCatalog::revision_of(const std::string& name) const {
+  auto it = entries_.find(name);
+  return it == entries_.end() ? 0 : it->second.second->revision();
 }
 
 std::string PluginCatalog::unknown(const std::string& name) const {

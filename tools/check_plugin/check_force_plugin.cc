@@ -14,6 +14,7 @@
 #include <fstream>
 #include <random>
 #include <set>
+#include <thread>
 
 #include "detail.h"
 #include "spml/envs/mujoco_model.h"
@@ -382,21 +383,31 @@ Outcome own_dofs(Bench& b, const std::vector<std::pair<std::string, std::string>
   return pass("attached to slide only, the other dofs untouched at " + std::to_string(b.states.size()) + " states");
 }
 
-// A prescribed trajectory (smooth sines, no integration): the forces along it.
-std::vector<std::vector<mjtNum>> trajectory(Bench& b, int steps) {
-  const double dt = b.m->opt.timestep;
+// A prescribed trajectory (smooth sines, no integration, phase-shifted per walk), walked one
+// step at a time: the force at each state, then an advance over the step.
+struct Walk {
+  const PluginInstance& inst;
+  mjData* d;
+  double phase = 0;
+  int k = 0;
   std::vector<std::vector<mjtNum>> out;
-  for (int k = 0; k < steps; ++k) {
-    State s{std::vector<mjtNum>(static_cast<size_t>(b.m->nq)), std::vector<mjtNum>(static_cast<size_t>(b.m->nv))};
-    for (int j = 0; j < b.m->nv; ++j) {
-      const double w = 2 * M_PI * (1.0 + 0.7 * j), t = k * dt;
-      s.qpos[j] = 0.8 * std::sin(w * t + j);
-      s.qvel[j] = 0.8 * w * std::cos(w * t + j);
-    }
-    out.push_back(force(b.inst, b.m, b.d.get(), s));
-    b.p.advance(b.inst.state(), b.m, b.d.get(), dt);
+};
+void step(const Bench& b, Walk& w) {
+  const double dt = b.m->opt.timestep, t = w.k * dt;
+  State s{std::vector<mjtNum>(static_cast<size_t>(b.m->nq)), std::vector<mjtNum>(static_cast<size_t>(b.m->nv))};
+  for (int j = 0; j < b.m->nv; ++j) {
+    const double f = 2 * M_PI * (1.0 + 0.7 * j);
+    s.qpos[j] = 0.8 * std::sin(f * t + j + w.phase);
+    s.qvel[j] = 0.8 * f * std::cos(f * t + j + w.phase);
   }
-  return out;
+  w.out.push_back(force(w.inst, b.m, w.d, s));
+  if (b.p.advance) b.p.advance(w.inst.state(), b.m, w.d, dt);
+  ++w.k;
+}
+std::vector<std::vector<mjtNum>> trajectory(Bench& b, int steps) {
+  Walk w{b.inst, b.d.get()};
+  for (int k = 0; k < steps; ++k) step(b, w);
+  return std::move(w.out);
 }
 
 Outcome reset(Bench& b) {
@@ -413,7 +424,62 @@ Outcome reset(Bench& b) {
   return pass("after reset, " + std::to_string(kSteps) + " steps replay the first trajectory bit for bit");
 }
 
-void check_one(const spml_force_plugin& p, const mjModel* m, Recorder& r) {
+// SPML_FORCE_INDEPENDENT: two instances of differently drawn configurations, each walked alone
+// along its own trajectory, then both walked in turn on one thread and at the same time on two:
+// the forces must be each one's own, bit for bit. State shared between instances (a global, a
+// cache) shows in turn; a scratch buffer that is not per thread may show on two threads.
+Outcome independent(Bench& b, uint32_t flags, const std::vector<std::pair<std::string, std::string>>& given, std::uint64_t seed) {
+  if (!(flags & SPML_FORCE_INDEPENDENT)) return skip("not flagged SPML_FORCE_INDEPENDENT (the host calls it from one thread)");
+  constexpr int kSteps = 300;
+  std::string detail[2];
+  std::unique_ptr<PluginInstance> inst[2];
+  DataPtr data[2] = {make_data(b.m), make_data(b.m)};
+  auto fresh = [&] {
+    for (int i = 0; i < 2; ++i) {
+      inst[i].reset();   // one at a time: the second is created after the first is gone
+      inst[i] = create(b.p, b.m, seed + 11 + static_cast<std::uint64_t>(i), given, &detail[i], {0, 1, 2}, true);
+      if (!inst[i]) return false;
+    }
+    return true;
+  };
+  std::vector<std::vector<mjtNum>> alone[2];
+  for (int i = 0; i < 2; ++i) {
+    inst[i] = create(b.p, b.m, seed + 11 + static_cast<std::uint64_t>(i), given, &detail[i], {0, 1, 2}, true);
+    if (!inst[i]) return fail("instance " + std::to_string(i + 1) + ": " + detail[i]);
+    Walk w{*inst[i], data[i].get(), 1.3 * i};
+    for (int k = 0; k < kSteps; ++k) step(b, w);
+    alone[i] = std::move(w.out);
+    inst[i].reset();
+  }
+  auto differs = [&](const Walk& w, int i, const std::string& how) -> std::string {
+    for (int k = 0; k < kSteps; ++k)
+      if (std::string why = disagreement(w.out[static_cast<size_t>(k)], alone[i][static_cast<size_t>(k)], 0, {}, how, "alone"); !why.empty())
+        return "instance " + std::to_string(i + 1) + " (" + detail[i] + "), step " + std::to_string(k) + ": " + why;
+    return "";
+  };
+  if (!fresh()) return fail("instances again: " + detail[0] + "; " + detail[1]);
+  {
+    Walk w0{*inst[0], data[0].get(), 0}, w1{*inst[1], data[1].get(), 1.3};
+    for (int k = 0; k < kSteps; ++k) step(b, w0), step(b, w1);
+    for (int i = 0; i < 2; ++i)
+      if (std::string why = differs(i ? w1 : w0, i, "stepped in turn with the other"); !why.empty()) return fail(why);
+  }
+  if (!fresh()) return fail("instances again: " + detail[0] + "; " + detail[1]);
+  {
+    Walk w0{*inst[0], data[0].get(), 0}, w1{*inst[1], data[1].get(), 1.3};
+    std::thread other([&] {
+      for (int k = 0; k < kSteps; ++k) step(b, w1);
+    });
+    for (int k = 0; k < kSteps; ++k) step(b, w0);
+    other.join();
+    for (int i = 0; i < 2; ++i)
+      if (std::string why = differs(i ? w1 : w0, i, "on two threads at once"); !why.empty()) return fail(why);
+  }
+  return pass("two instances give their own forces bit for bit along " + std::to_string(kSteps) +
+              " steps each, stepped in turn on one thread and at once on two");
+}
+
+void check_one(const spml_force_plugin& p, uint32_t flags, const mjModel* m, Recorder& r) {
   const std::string name = p.name;
   r.run(name, "shape-params", [&] { return shape_params(p); });
   if (std::string why = force_plugin_problem(p); !why.empty()) return r.record(name, "callbacks", fail(why));
@@ -444,6 +510,7 @@ void check_one(const spml_force_plugin& p, const mjModel* m, Recorder& r) {
   compare("params-roundtrip", [&] { return params_roundtrip(b); });
   compare("write-config", [&] { return write_config(b, given, r.seed()); });
   compare("reset", [&] { return reset(b); });
+  compare("independent", [&] { return independent(b, flags, given, r.seed()); });
 }
 
 }  // namespace
@@ -453,7 +520,8 @@ void check_force_plugins(const std::string& file, Recorder& recorder) {
   if (!lib) return;
   const ModelPtr m = write_and_load_model(recorder.seed());
   for (const void* e : lib->entries())
-    if (recorder.wanted(static_cast<const spml_force_plugin*>(e)->name)) check_one(*static_cast<const spml_force_plugin*>(e), m.get(), recorder);
+    if (const auto& p = *static_cast<const spml_force_plugin*>(e); recorder.wanted(p.name))
+      check_one(p, force_plugin_flags(p, lib->revision()), m.get(), recorder);
 }
 
 }  // namespace spml::check

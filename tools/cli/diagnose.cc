@@ -88,6 +88,8 @@ void add_diagnose(CLI::App& app) {
       ->check(CLI::IsMember({"iv", "ls"}));
   cmd->add_option("--prior-weight", o->prior_weight, "weight of the prior toward the MJCF in the consistent fit extended.xml states when parameters are named")
       ->capture_default_str()->check(finite_number(1e-6, 1e6));
+  cmd->add_option("--threads", o->threads, "threads for the searches (0: the machine's cores, at most 4); the report does not depend on it")
+      ->capture_default_str()->check(CLI::Range(0, 256));
   cmd->add_flag("--no-plots", *no_plots, "do not draw plots/ (needs /usr/bin/python3 with matplotlib)");
   cmd->callback([=] {
     o->data = datas->front();

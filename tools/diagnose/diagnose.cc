@@ -10,6 +10,7 @@
 #include <stdexcept>
 
 #include "diagnosis.h"
+#include "parallel.h"
 #include "report.h"
 #include "spml/dataset.h"   // utf8_problem
 #include "spml/matrix_file.h"
@@ -123,6 +124,7 @@ void DiagnoseOptions::check() const {
   in("bic_threshold", bic_threshold, 0, 1e9);
   in("min_gain", min_gain, 0, 1);
   in("max_causes", max_causes, 1, 1000);
+  in("threads", threads, 0, 256);
   in("still_speed", still_speed, 0, 1e9);
   in("rollout_seconds", rollout_seconds, 1e-3, 10);
   in("rollouts", rollouts, 0, 10000);
@@ -150,6 +152,7 @@ DiagnoseResult diagnose(const DiagnoseOptions& options, const std::string& out_d
   using namespace diagnose_detail;
   namespace fs = std::filesystem;
   options.check();
+  const ThreadCap cap(static_cast<unsigned>(options.threads));
   Diagnosis d(options);
   if (out_dir.empty()) return d.run("");
   const fs::path out(out_dir);

@@ -30,6 +30,7 @@
 #include <functional>
 #include <limits>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <set>
 #include <string>
@@ -489,7 +490,13 @@ class Diagnosis {
   std::vector<int> offset_beside_;   // #22: causes beside the delay search's nuisance (offset_beside)
   mutable std::optional<bool> degrees_;   // the model file's hinge angles in degrees (written_form.cc)
   mutable std::optional<std::vector<std::string>> defined_joints_;   // the joints the model file itself defines (written_form.cc)
-  mutable std::shared_ptr<mjData> sim_data_;   // #22: the state the stateful simulations read (one thread)
+  // #22: the states the stateful simulations read, one per thread at a time, kept between calls
+  // (making one costs more than a whole pass along a split).
+  struct SimDataPool {
+    std::mutex mutex;
+    std::vector<std::shared_ptr<mjData>> free;
+  };
+  mutable std::shared_ptr<SimDataPool> sim_data_ = std::make_shared<SimDataPool>();
   std::deque<spml_shape_param> synthesized_;   // #22: the level keys of stateful plugins, searched as shapes
 };
 

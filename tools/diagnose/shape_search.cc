@@ -9,6 +9,8 @@
 #include <functional>
 
 #include "diagnosis.h"
+#include "parallel.h"
+#include "spml/force_effects.h"
 
 namespace spml::diagnose_detail {
 namespace {
@@ -22,9 +24,10 @@ struct ShapeSearch {
   std::vector<double> best;
   double best_drop = -1;
 
-  // Keeps p when it gains more than the best so far (or at least `tolerance` of it).
-  bool offer(const std::vector<double>& p, double tolerance = 0) {
-    const Gain g = evaluate(p, nullptr);
+  // Keeps p when it gains more than the best so far (or at least `tolerance` of it); `take`
+  // with its gain already evaluated.
+  bool offer(const std::vector<double>& p, double tolerance = 0) { return take(p, evaluate(p, nullptr), tolerance); }
+  bool take(const std::vector<double>& p, const Gain& g, double tolerance = 0) {
     const bool better = g.rank > 0 && (tolerance > 0 ? g.rss_drop >= best_drop * (1 - tolerance) : g.rss_drop > best_drop);
     if (!better) return false;
     best = p;
@@ -56,18 +59,23 @@ std::vector<std::vector<double>> grid_axes(const Candidate& c, int per_axis) {
   return axes;
 }
 
-void grid_scan(ShapeSearch& s, const std::vector<std::vector<double>>& axes) {
+// The grid's points evaluated on the cores (`serial`: on one thread), offered in grid order.
+void grid_scan(ShapeSearch& s, const std::vector<std::vector<double>>& axes, bool serial) {
   const size_t ns = axes.size();
-  std::vector<double> point(ns);
+  std::vector<std::vector<double>> points;
   std::vector<size_t> idx(ns, 0);
   s.best.assign(ns, 0.0);
   for (;;) {
+    std::vector<double> point(ns);
     for (size_t k = 0; k < ns; ++k) point[k] = axes[k][idx[k]];
-    s.offer(point);
+    points.push_back(std::move(point));
     size_t k = 0;
     while (k < ns && ++idx[k] == axes[k].size()) idx[k++] = 0;
     if (k == ns) break;
   }
+  std::vector<Gain> gains(points.size());
+  parallel_for(points.size(), [&](size_t i) { gains[i] = s.evaluate(points[i], nullptr); }, serial);
+  for (size_t i = 0; i < points.size(); ++i) s.take(points[i], gains[i]);
 }
 
 // Zoomed scans per parameter around the best grid point: the objective is piecewise constant
@@ -176,7 +184,8 @@ double Diagnosis::search_shape(Candidate& c, const Fit& current) {
   }
   ShapeSearch s{evaluate, c, ns == 1 ? 40 : ns == 2 ? 16 : 6, {}, -1};
   const auto axes = grid_axes(c, s.per_axis);
-  grid_scan(s, axes);
+  current.Q();   // formed once here: the grid's points project on it from several threads
+  grid_scan(s, axes, !(force_plugin_flags(*c.plugin) & SPML_FORCE_INDEPENDENT));
   if (s.best_drop < 0) {
     c.gain = Gain{};
     return 0;

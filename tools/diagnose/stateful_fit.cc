@@ -25,6 +25,8 @@
 #include <map>
 
 #include "diagnosis.h"
+#include "parallel.h"
+#include "spml/force_effects.h"
 #include "spml/parse.h"
 #include "statistics.h"
 
@@ -62,6 +64,10 @@ Eigen::VectorXd log_derivative(const ForceAt& force, const std::vector<double>& 
 }  // namespace
 
 bool is_stateful(const spml_force_plugin& p) { return !p.regressor && p.advance && p.reset; }
+
+// Whether a candidate's simulations must stay on one thread (parallel_for's `serial`): unless
+// its library flags the plugin's instances independent, and each thread walks its own.
+static bool one_thread(const Candidate& c) { return !(force_plugin_flags(*c.plugin) & SPML_FORCE_INDEPENDENT); }
 
 // A level key (fc, fs, sigma2: no shape parameter of the plugin's own, ranged by the fit).
 bool Diagnosis::is_level(const spml_shape_param* sp) const {
@@ -106,13 +112,20 @@ void Diagnosis::add_stateful_candidates(const spml_force_plugin& p) {
 // time stamp. Inverse-dynamics sign, parallel filter.
 BlockColumns Diagnosis::simulated_columns(const PluginInstance& inst, const SplitData& s) const {
   const mjModel* m = reg_->model();
-  // One mjData for every simulation (making one costs more than a whole pass along a split).
-  if (!sim_data_) sim_data_ = std::shared_ptr<mjData>(mj_makeData(m), [](mjData* p) { mj_deleteData(p); });
-  mjData* const dd = sim_data_.get();
-  struct NoDelete {
-    void operator()(mjData*) const {}
-  };
-  std::unique_ptr<mjData, NoDelete> d(dd);
+  std::shared_ptr<mjData> d;
+  {
+    std::lock_guard<std::mutex> lock(sim_data_->mutex);
+    if (!sim_data_->free.empty()) d = std::move(sim_data_->free.back()), sim_data_->free.pop_back();
+  }
+  if (!d) d = std::shared_ptr<mjData>(mj_makeData(m), [](mjData* p) { mj_deleteData(p); });
+  struct GiveBack {
+    SimDataPool& pool;
+    std::shared_ptr<mjData>& d;
+    ~GiveBack() {
+      std::lock_guard<std::mutex> lock(pool.mutex);
+      pool.free.push_back(std::move(d));
+    }
+  } give_back{*sim_data_, d};
   const int O = static_cast<int>(s.split.Y.cols());
   BlockBuilder C(s.N, O, 1);
   std::vector<mjtNum> qfrc(static_cast<size_t>(m->nv));
@@ -233,12 +246,13 @@ double Diagnosis::scan_shape_keys(const Candidate& c, const Fit& current, const 
   double best = stateful_drop(c, current, x);
   for (size_t k = 0; k < x.size(); ++k) {
     if (level[k]) continue;
-    std::vector<double> trial = x;
+    std::vector<std::vector<double>> trial(9, x);
+    std::vector<double> drop(trial.size());
+    for (size_t i = 0; i < trial.size(); ++i) trial[i][k] = lb[k] + (ub[k] - lb[k]) * static_cast<double>(i) / 8.0;
+    parallel_for(trial.size(), [&](size_t i) { drop[i] = stateful_drop(c, current, trial[i]); }, one_thread(c));
     double keep = x[k];
-    for (int i = 0; i <= 8; ++i) {
-      trial[k] = lb[k] + (ub[k] - lb[k]) * i / 8.0;
-      if (const double g = stateful_drop(c, current, trial); g > best) best = g, keep = trial[k];
-    }
+    for (size_t i = 0; i < trial.size(); ++i)
+      if (drop[i] > best) best = drop[i], keep = trial[i][k];
     x[k] = keep;
   }
   return best;
@@ -249,18 +263,23 @@ void Diagnosis::fit_stateful(Candidate& c, const Fit& current) {
   if (fit_.split.t.size() != fit_.N) throw PluginError("no time stamps: a stateful effect cannot be integrated along the fit split");
   const size_t ns = c.shape.size();
   auto [lb, ub, level] = stateful_space(c);
+  current.Q();   // formed once here: the simulations below project on it from several threads
   std::vector<double> x(ns);
   for (size_t k = 0; k < ns; ++k) x[k] = 0.5 * (lb[k] + ub[k]);
   // The common level of the non-shape keys: a scan from 1 % to 3x the residual's RMS on the joint.
   const int o = static_cast<int>(std::find(out_joint_index_.begin(), out_joint_index_.end(), c.joint) - out_joint_index_.begin());
   const double rms = std::sqrt(current.residual.segment(o * fit_.N, fit_.N).squaredNorm() / static_cast<double>(fit_.N));
   double best_level = rms, best = -std::numeric_limits<double>::infinity();
-  for (int i = 0; i <= 15; ++i) {
-    const double a = rms * std::pow(10.0, -2.0 + 2.5 * i / 15.0);
+  std::vector<double> scale(16), drop(scale.size());
+  std::vector<std::vector<double>> at(scale.size(), x);
+  for (size_t i = 0; i < scale.size(); ++i) {
+    scale[i] = rms * std::pow(10.0, -2.0 + 2.5 * static_cast<double>(i) / 15.0);
     for (size_t k = 0; k < ns; ++k)
-      if (level[k]) x[k] = std::log(a);
-    if (const double g = stateful_drop(c, current, x); g > best) best = g, best_level = a;
+      if (level[k]) at[i][k] = std::log(scale[i]);
   }
+  parallel_for(scale.size(), [&](size_t i) { drop[i] = stateful_drop(c, current, at[i]); }, one_thread(c));
+  for (size_t i = 0; i < scale.size(); ++i)
+    if (drop[i] > best) best = drop[i], best_level = scale[i];
   for (size_t k = 0; k < ns; ++k)
     if (level[k]) {
       x[k] = std::log(best_level);
@@ -298,11 +317,8 @@ void Diagnosis::fit_stateful(Candidate& c, const Fit& current) {
     // Two polishes: from the scanned or static start, and from the grid's best point (polishing
     // all of them twice cost the Panda's 7 joints 215 s of search).
     std::vector<double> grid = grid_start(c, current, level, lb, ub, x);
-    polish_stateful(c, current, lb, ub, x);
-    if (!grid.empty()) {
-      polish_stateful(c, current, lb, ub, grid);
-      if (stateful_drop(c, current, grid) > stateful_drop(c, current, x)) x = std::move(grid);
-    }
+    parallel_for(grid.empty() ? 1 : 2, [&](size_t i) { polish_stateful(c, current, lb, ub, i ? grid : x); }, one_thread(c));
+    if (!grid.empty() && stateful_drop(c, current, grid) > stateful_drop(c, current, x)) x = std::move(grid);
   }
   stateful_errors(c, current, x);
   c.shape_values.resize(ns);
@@ -326,17 +342,21 @@ std::vector<double> Diagnosis::grid_start(const Candidate& c, const Fit& current
   size_t total = 1;
   for (size_t i = 0; i < keys.size(); ++i) total *= kPerKey;
   if (keys.empty() || total > 2401) return {};
-  std::vector<double> best;
-  double best_drop = -std::numeric_limits<double>::infinity();
-  for (size_t idx = 0; idx < total; ++idx) {
+  auto point = [&](size_t idx) {
     std::vector<double> p = x;
     size_t rest = idx;
     for (size_t k : keys) {
       p[k] = lb[k] + (ub[k] - lb[k]) * (static_cast<double>(rest % kPerKey) + 0.5) / kPerKey;
       rest /= kPerKey;
     }
-    if (const double g = stateful_drop(c, current, p); g > best_drop) best_drop = g, best = std::move(p);
-  }
+    return p;
+  };
+  std::vector<double> drop(total);
+  parallel_for(total, [&](size_t idx) { drop[idx] = stateful_drop(c, current, point(idx)); }, one_thread(c));
+  std::vector<double> best;
+  double best_drop = -std::numeric_limits<double>::infinity();
+  for (size_t idx = 0; idx < total; ++idx)
+    if (drop[idx] > best_drop) best_drop = drop[idx], best = point(idx);
   return best;
 }
 
@@ -404,15 +424,19 @@ std::vector<std::string> Diagnosis::profile_stateful(const Candidate& c, const F
                                                      const std::vector<double>& lb, const std::vector<double>& ub,
                                                      const std::vector<double>& x) const {
   const size_t ns = x.size();
+  current.Q();   // formed once here: the points below project on it from several threads
   // A level the fit declares 0 (settle_levels: the data do not need it, LuGre's sigma2 beside
   // the MJCF's damping) is not part of the effect: held at its floor, not profiled. (Free, its
   // two points and its place in every polish cost a quarter of the profile: 3.5 s against 2.6
   // on the delayed LuGre benchmark's joint, profiled on both sides of the delay.)
   std::vector<bool> declared_zero(ns, false);
   for (size_t k = 0; k < ns; ++k) declared_zero[k] = level[k] && k < c.shape_values.size() && c.shape_values[k] == 0;
-  std::vector<std::vector<double>> points;
+  // The points' (key, value) first, then each point's scan and polish, on the cores.
+  std::vector<std::pair<size_t, double>> held_at;
   auto add = [&](size_t k, double value) {
-    if (value < lb[k] || value > ub[k]) return;
+    if (value >= lb[k] && value <= ub[k]) held_at.emplace_back(k, value);
+  };
+  auto point = [&](size_t k, double value) {
     std::vector<double> p = x;
     p[k] = value;
     // A level moved alone may leave what the plugin accepts (LuGre's fc <= fs: fs halved below
@@ -426,7 +450,7 @@ std::vector<std::string> Diagnosis::profile_stateful(const Candidate& c, const F
     std::vector<bool> fixed = declared_zero;
     fixed[k] = true;
     polish_stateful(c, current, lb, ub, p, fixed, kProfileEvalsPerKey);
-    points.push_back(std::move(p));
+    return p;
   };
   for (size_t k = 0; k < ns; ++k) {
     if (declared_zero[k]) continue;
@@ -436,6 +460,8 @@ std::vector<std::string> Diagnosis::profile_stateful(const Candidate& c, const F
     for (int i = 0; i < kProfileCells; ++i)
       if (const double v = lb[k] + cell * (i + 0.5); std::fabs(v - x[k]) >= 0.5 * cell) add(k, v);   // x's own cell: x is its point
   }
+  std::vector<std::vector<double>> points(held_at.size());
+  parallel_for(points.size(), [&](size_t i) { points[i] = point(held_at[i].first, held_at[i].second); }, one_thread(c));
   // The joint's residual sum of squares at a point (its output's rows of the residual with the
   // projected force taken out; the projection moves the other outputs' rows too, the base
   // parameters being shared, but the force acts on this joint's).
@@ -452,8 +478,11 @@ std::vector<std::string> Diagnosis::profile_stateful(const Candidate& c, const F
   const double n_eff = static_cast<double>(fit_.N) * effective_fraction(r, fit_.N);
   std::vector<std::string> spread;
   std::vector<bool> loose(ns, false);
-  for (const auto& p : points) {
-    if (!(n_eff * std::log(std::max(joint_rss(p), rss_best) / rss_best) <= kProfileChi2)) continue;
+  std::vector<double> rss(points.size());
+  parallel_for(points.size(), [&](size_t i) { rss[i] = joint_rss(points[i]); }, one_thread(c));
+  for (size_t i = 0; i < points.size(); ++i) {
+    const auto& p = points[i];
+    if (!(n_eff * std::log(std::max(rss[i], rss_best) / rss_best) <= kProfileChi2)) continue;
     for (size_t k = 0; k < ns; ++k) loose[k] = loose[k] || std::fabs(std::exp(p[k] - x[k]) - 1) >= kNotIdentifiable * (1 - 1e-9);
   }
   for (size_t k = 0; k < ns; ++k)
@@ -875,11 +904,13 @@ void Diagnosis::stateful_errors(Candidate& c, const Fit& current, const std::vec
   if (!std::isfinite(drop)) return;
   const ForceAt projected = [&](const std::vector<double>& y, Eigen::VectorXd& F) { return std::isfinite(stateful_drop(c, current, y, &F)); };
   Eigen::MatrixXd J(F0.size(), static_cast<Eigen::Index>(ns));
-  for (size_t k = 0; k < ns; ++k) {
-    bool edge = false;
-    J.col(static_cast<Eigen::Index>(k)) = log_derivative(projected, x, k, F0, &edge);
-    c.at_edge[k] = edge;
-  }
+  std::vector<char> edge(ns, 0);   // not vector<bool>: its bits are not written apart from two threads
+  parallel_for(ns, [&](size_t k) {
+    bool e = false;
+    J.col(static_cast<Eigen::Index>(k)) = log_derivative(projected, x, k, F0, &e);
+    edge[k] = e;
+  }, one_thread(c));
+  for (size_t k = 0; k < ns; ++k) c.at_edge[k] = edge[k];
   const Eigen::VectorXd r = current.residual - F0;
   const double n = static_cast<double>(r.size());
   const double s2 = r.squaredNorm() / std::max(n - current.rank - static_cast<double>(ns), 1.0) / effective_fraction(r, fit_.N);

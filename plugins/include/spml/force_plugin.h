@@ -1,4 +1,4 @@
-/* spml force-plugin ABI, version 3.
+/* spml force-plugin ABI, version 3 (revision 1).
  *
  * A force plugin adds a passive generalized force to a MuJoCo model: friction of some kind,
  * a ripple, an offset. MuJoCo 2.2.2 has no engine-plugin API, so this is spml's own, shaped
@@ -18,6 +18,13 @@
  * NULL-terminated key names. 2 - this layout (snake_case, several plugins per library,
  * typed key table, size_t error buffers, shape parameters). 3 - write_config, so a fitted
  * instance can be written back into an MJCF declaration (spml diagnose's extended model).
+ *
+ * Revisions add to a version without breaking it, so the version number stays and a library
+ * built before keeps loading unchanged. A library of revision r >= 1 also exports
+ *   int32_t spml_force_plugin_abi_revision(void);          returns the r it was built for
+ * and its entries carry the members appended up to r; the host reads an appended member only
+ * from a library that declares its revision (one without the symbol is revision 0, and its
+ * shorter entries end at write_config). Revision 1: flags (SPML_FORCE_INDEPENDENT).
  */
 #ifndef SPML_FORCE_PLUGIN_H
 #define SPML_FORCE_PLUGIN_H
@@ -31,6 +38,13 @@ extern "C" {
 #endif
 
 #define SPML_FORCE_PLUGIN_ABI_VERSION 3
+#define SPML_FORCE_PLUGIN_ABI_REVISION 1   /* the newest revision this header describes (see above) */
+
+/* flags (revision 1). INDEPENDENT: instances share no mutable state (no globals, no caches
+ * between instances), so the host may call two instances from two threads at the same time;
+ * one instance is never called from two threads at once. spml check-plugin tests the promise
+ * (clause `independent`). Without it the host calls the plugin from one thread. */
+#define SPML_FORCE_INDEPENDENT 1u
 
 /* Where a shape parameter's search range is measured (see spml_shape_param). */
 #define SPML_SHAPE_ABSOLUTE 0  /* lo..hi as given */
@@ -90,6 +104,9 @@ typedef struct spml_force_plugin {
    * parameters (set_params included). Returns the length it needed (like snprintf); the
    * host retries with a larger buffer when that is >= size. */
   int32_t (*write_config)(const void* instance, char* buf, size_t size);
+
+  /* Revision 1 (read only from a library that exports spml_force_plugin_abi_revision): */
+  uint32_t flags;                   /* SPML_FORCE_* bits, 0 for none */
 } spml_force_plugin;
 
 #ifdef __cplusplus

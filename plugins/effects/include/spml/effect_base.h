@@ -128,6 +128,8 @@ const spml_force_plugin* make_descriptor() {
   static const spml_force_plugin d = [] {
     spml_force_plugin p{};
     p.abi_version = SPML_FORCE_PLUGIN_ABI_VERSION;
+    // Every effect keeps its state in its instance (compute_linear's scratch is per thread).
+    p.flags = SPML_FORCE_INDEPENDENT;
     p.name = E::kName;
     p.summary = E::kDescription;
     p.config_keys = E::kKeys;
@@ -187,9 +189,10 @@ void compute_linear(const E& e, const mjModel* m, const mjData* d, mjtNum* qfrc)
 
 }  // namespace spml::effects
 
-// One effect per library: the two entry points of force_plugin.h.
+// One effect per library: the entry points of force_plugin.h (revision 1: its flags).
 #define SPML_EXPORT_FORCE_PLUGIN(Effect)                                                              \
   extern "C" SPML_EXPORT int32_t spml_force_plugin_abi_version(void) { return SPML_FORCE_PLUGIN_ABI_VERSION; } \
+  extern "C" SPML_EXPORT int32_t spml_force_plugin_abi_revision(void) { return SPML_FORCE_PLUGIN_ABI_REVISION; } \
   extern "C" SPML_EXPORT const spml_force_plugin* spml_force_plugin_get(int32_t i) {                   \
     return i == 0 ? spml::effects::make_descriptor<Effect>() : nullptr;                               \
   }

@@ -49,6 +49,11 @@ PluginCatalog& force_plugins();
 const spml_force_plugin& load_force_plugin(const std::string& type, const std::string& element = "");
 // Names of all plugins found.
 std::vector<std::string> available_force_plugins();
+// A plugin's SPML_FORCE_* flags: its `flags` member where its library declares revision >= 1
+// (the member exists only there), else 0. The first form looks the library up in
+// force_plugins() (0 for a descriptor not found there).
+uint32_t force_plugin_flags(const spml_force_plugin& plugin, int revision);
+uint32_t force_plugin_flags(const spml_force_plugin& plugin);
 // How force-plugin libraries are recognised (symbol prefix, ABI version, search folders).
 const PluginKind& force_plugin_kind();
 // "" for a descriptor the host can use, else what is wrong with it (required callbacks

@@ -53,10 +53,14 @@ class PluginLibrary {
   PluginLibrary& operator=(const PluginLibrary&) = delete;
   const std::string& file() const { return file_; }
   const std::vector<const void*>& entries() const { return entries_; }
+  // The ABI revision the library declares (<prefix>_abi_revision, an optional symbol; 0
+  // without it): which appended members its entries carry.
+  int revision() const { return revision_; }
 
  private:
   std::string file_;
   void* handle_ = nullptr;
+  int revision_ = 0;
   std::vector<const void*> entries_;
 };
 
@@ -78,6 +82,7 @@ class PluginCatalog {
 
   const void* find(const std::string& name) const;       // nullptr if unknown
   std::string file_of(const std::string& name) const;
+  int revision_of(const std::string& name) const;        // its library's revision(); 0 if unknown
   const std::vector<std::string>& names() const { return order_; }   // load order
   const std::vector<std::string>& warnings() const { return warnings_; }
   const PluginKind& kind() const { return kind_; }

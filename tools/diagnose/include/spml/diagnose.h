@@ -64,6 +64,10 @@ struct DiagnoseOptions {
   // "iv" (instrumental variables, instruments from the model simulated along the fit split:
   // spml/envs/instruments.h) or "ls" (least squares). Causes are selected by least squares.
   std::string estimator = "iv";
+  // Threads for the work that can be split (its linear algebra, the simulations of plugins
+  // flagged SPML_FORCE_INDEPENDENT): 0, the machine's cores up to four. The numbers do not
+  // depend on it. (Process-wide while a diagnosis runs.)
+  int threads = 0;
 
   // Throws std::invalid_argument naming the first option out of its range (every number must
   // be finite; holdout in [0.05, 0.9], min_gain in [0, 1], ...). diagnose() calls it first.
