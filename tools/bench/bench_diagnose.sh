@@ -31,6 +31,16 @@ PY
   --lowpass 20 --derive --drop-edges 300 --out "$out/arm_lugre.h5" > /dev/null
 /usr/bin/time -f "arm 6000 x 3, delay + LuGre: %e s wall, %M KiB peak" "$spml" diagnose --model "$root/mjcf/planar_arm3.xml" \
   --data "$out/arm_lugre.h5" --out "$out/arm_lugre" --no-plots 2>&1 | grep -v "^$\|WARNING"
+# The same on one thread (the shipped plugins' simulations run on the cores otherwise): the
+# report must be the same, timings aside.
+/usr/bin/time -f "arm 6000 x 3, delay + LuGre, --threads 1: %e s wall, %M KiB peak" "$spml" diagnose --model "$root/mjcf/planar_arm3.xml" \
+  --data "$out/arm_lugre.h5" --out "$out/arm_lugre_1" --no-plots --threads 1 2>&1 | grep -v "^$\|WARNING"
+/usr/bin/python3 - "$out/arm_lugre/report.json" "$out/arm_lugre_1/report.json" <<'PY'
+import json, sys
+a, b = (json.load(open(f)) for f in sys.argv[1:])
+for r in (a, b): r.pop("timings_s", None)
+print("report.json on the cores and on one thread:", "identical (timings aside)" if a == b else "DIFFERENT")
+PY
 data=${SPML_SHARED_DATA:-$root/../shared/data}/panda
 if [ -f "$data/panda_nohand.xml" ]; then
   "$spml" import --text "$data/exciting_traj_positions.txt=q:joint{1..7}" --text "$data/exciting_traj_velocity.txt=qd:joint{1..7}" \
