@@ -155,6 +155,10 @@ TEST(CheckPlugin, RefusesHiddenStateThatAppearsLate) {
 TEST(CheckPlugin, RefusesInstancesThatShareStateWhileFlaggedIndependent) {
   expect_only_failure("force_shared", "broken_viscous independent");
   EXPECT_TRUE(has(check(broken("force_shared")).output, "stepped in turn with the other")) << check(broken("force_shared")).output;
+  // The same global with the flag declined (effect_base.h: kIndependent = false) breaks nothing.
+  const auto declined = check(broken("force_shared_declared"));
+  EXPECT_EQ(declined.exit_code, 0) << declined.output;
+  EXPECT_TRUE(has(declined.output, "SKIP  broken_viscous  independent: not flagged")) << declined.output;
 }
 
 // Hidden state shows in every clause that calls compute twice; the one it breaks is named.

@@ -45,7 +45,7 @@ void bind_diagnose(pb::module_& m) {
       [](const std::string& model, const std::string& data, const std::string& out, const std::string& fit_split,
          const std::string& test_split, double holdout, double bic_threshold, double min_gain, int max_causes,
          double still_speed, double rollout_seconds, int rollouts, const std::string& estimator, const std::vector<std::string>& cross,
-         const std::vector<std::string>& plugin_path) {
+         const std::vector<std::string>& plugin_path, int threads) {
         DiagnoseOptions o;
         o.fit_split = fit_split;
         o.test_split = test_split;
@@ -58,13 +58,15 @@ void bind_diagnose(pb::module_& m) {
         o.rollouts = rollouts;
         o.estimator = estimator;
         o.cross = cross;
+        o.threads = threads;
         return run(model, data, out, o, plugin_path);
       },
       pb::arg("model"), pb::arg("data"), pb::arg("out") = "", pb::arg("fit_split") = d.fit_split, pb::arg("test_split") = d.test_split,
       pb::arg("holdout") = d.holdout, pb::arg("bic_threshold") = d.bic_threshold, pb::arg("min_gain") = d.min_gain,
       pb::arg("max_causes") = d.max_causes, pb::arg("still_speed") = d.still_speed,
       pb::arg("rollout_seconds") = d.rollout_seconds, pb::arg("rollouts") = d.rollouts,
-      pb::arg("estimator") = d.estimator, pb::arg("cross") = std::vector<std::string>{}, pb::arg("plugin_path") = std::vector<std::string>{});
+      pb::arg("estimator") = d.estimator, pb::arg("cross") = std::vector<std::string>{}, pb::arg("plugin_path") = std::vector<std::string>{},
+      pb::arg("threads") = d.threads);
 }
 
 }  // namespace spml::py

@@ -120,6 +120,10 @@ template <class E, class = void> struct is_linear : std::false_type {};
 template <class E> struct is_linear<E, std::void_t<decltype(E::kLinear)>> : std::bool_constant<E::kLinear> {};
 template <class E, class = void> struct has_shape : std::false_type {};
 template <class E> struct has_shape<E, std::void_t<decltype(E::kShape)>> : std::true_type {};
+// An effect is flagged SPML_FORCE_INDEPENDENT unless its class says `static constexpr bool
+// kIndependent = false` (one that keeps state outside its instance: a global, a shared cache).
+template <class E, class = void> struct is_independent : std::true_type {};
+template <class E> struct is_independent<E, std::void_t<decltype(E::kIndependent)>> : std::bool_constant<E::kIndependent> {};
 template <class E, class = void> struct is_stateful : std::false_type {};
 template <class E> struct is_stateful<E, std::void_t<decltype(E::kStateful)>> : std::bool_constant<E::kStateful> {};
 
@@ -128,8 +132,8 @@ const spml_force_plugin* make_descriptor() {
   static const spml_force_plugin d = [] {
     spml_force_plugin p{};
     p.abi_version = SPML_FORCE_PLUGIN_ABI_VERSION;
-    // Every effect keeps its state in its instance (compute_linear's scratch is per thread).
-    p.flags = SPML_FORCE_INDEPENDENT;
+    // State kept in the instance (compute_linear's scratch is per thread), unless the class says not.
+    p.flags = is_independent<E>::value ? SPML_FORCE_INDEPENDENT : 0u;
     p.name = E::kName;
     p.summary = E::kDescription;
     p.config_keys = E::kKeys;
