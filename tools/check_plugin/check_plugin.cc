@@ -164,7 +164,10 @@ std::unique_ptr<PluginLibrary> load_library(const std::string& file, const Plugi
     recorder.record("", "abi-version", fail(e.what()));
     return nullptr;
   }
-  recorder.record("", "abi-version", pass(kind.label + " ABI version " + std::to_string(kind.abi_version) + ", " +
+  // The revision a library declares by symbol (force plugins; learners say it per entry, by
+  // flags): a later one than this spml knows loads too, its further members unread.
+  const std::string revision = lib->revision() > 0 ? ", revision " + std::to_string(lib->revision()) : "";
+  recorder.record("", "abi-version", pass(kind.label + " ABI version " + std::to_string(kind.abi_version) + revision + ", " +
                                          std::to_string(lib->entries().size()) + " entries"));
   std::string problem;
   std::set<std::string> names;
