@@ -14,8 +14,8 @@
 #include <fstream>
 #include <random>
 #include <set>
-#include <thread>
 #include <atomic>
+#include <thread>
 
 #include "detail.h"
 #include "spml/envs/mujoco_model.h"
@@ -387,9 +387,10 @@ Outcome own_dofs(Bench& b, const std::vector<std::pair<std::string, std::string>
 // A prescribed trajectory (smooth sines, no integration, phase-shifted per walk), walked one
 // step at a time: the force at each state, then an advance over the step.
 struct Walk {
+  Walk(const PluginInstance& instance, mjData* data, double phase_shift = 0) : inst(instance), d(data), phase(phase_shift) {}
   const PluginInstance& inst;
   mjData* d;
-  double phase = 0;
+  double phase;
   int k = 0;
   std::vector<std::vector<mjtNum>> out;
 };
@@ -437,18 +438,17 @@ Outcome independent(Bench& b, uint32_t flags, const std::vector<std::pair<std::s
   std::string detail[2];
   std::unique_ptr<PluginInstance> inst[2];
   DataPtr data[2] = {make_data(b.m), make_data(b.m)};
-  auto fresh = [&] {
-    for (int i = 0; i < 2; ++i) {
-      inst[i].reset();   // one at a time: the second is created after the first is gone
-      inst[i] = create(b.p, b.m, seed + 11 + static_cast<std::uint64_t>(i), given, &detail[i], {0, 1, 2}, true);
-      if (!inst[i]) return false;
-    }
-    return true;
+  auto make = [&](int i) {
+    inst[i] = create(b.p, b.m, seed + 11 + static_cast<std::uint64_t>(i), given, &detail[i], {0, 1, 2}, true);
+    return inst[i] != nullptr;
+  };
+  auto fresh = [&] {   // both anew, the earlier ones gone first
+    inst[0].reset(), inst[1].reset();
+    return make(0) && make(1);
   };
   std::vector<std::vector<mjtNum>> alone[2];
   for (int i = 0; i < 2; ++i) {
-    inst[i] = create(b.p, b.m, seed + 11 + static_cast<std::uint64_t>(i), given, &detail[i], {0, 1, 2}, true);
-    if (!inst[i]) return fail("instance " + std::to_string(i + 1) + ": " + detail[i]);
+    if (!make(i)) return fail("instance " + std::to_string(i + 1) + ": " + detail[i]);
     Walk w{*inst[i], data[i].get(), 1.3 * i};
     for (int k = 0; k < kSteps; ++k) step(b, w);
     alone[i] = std::move(w.out);

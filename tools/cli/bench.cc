@@ -228,7 +228,7 @@ void add_plugins(CLI::App& app) {
                             {"log_scale", static_cast<bool>(sp->log_scale)}, {"integer", static_cast<bool>(sp->integer)}});
         list.push_back({{"name", n}, {"summary", p->summary ? p->summary : ""}, {"file", catalog.file_of(n)},
                         {"linear", p->regressor != nullptr}, {"config_keys", keys}, {"shape_params", shapes},
-                        {"abi_revision", catalog.revision_of(n)}, {"independent", (force_plugin_flags(*p) & SPML_FORCE_INDEPENDENT) != 0}});
+                        {"abi_revision", catalog.revision_of(n)}, {"independent", force_plugin_independent(*p)}});
       }
       std::cout << json_output(nlohmann::json{{"plugins", list}}, "plugins --json");
       return;
@@ -237,7 +237,7 @@ void add_plugins(CLI::App& app) {
       const auto* p = static_cast<const spml_force_plugin*>(catalog.find(n));
       std::cout << n << "\t" << p->summary << "\t[" << catalog.file_of(n) << "]\n"
                 << "    ABI revision " << catalog.revision_of(n)
-                << ((force_plugin_flags(*p) & SPML_FORCE_INDEPENDENT) ? ", instances independent: diagnose runs it on several threads\n"
+                << (force_plugin_independent(*p) ? ", instances independent: diagnose runs it on several threads\n"
                                                                        : ", one thread\n");
       for (const spml_config_key* k = p->config_keys; k && k->name; ++k)
         std::cout << "    " << k->name << (k->default_value ? " = " + std::string(k->default_value) : std::string(" (required)"))

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <mutex>
 #include <stdexcept>
 
 namespace spml::diagnose_detail {
@@ -177,6 +178,11 @@ struct Factors {
 };
 
 const Eigen::MatrixXd& Fit::Q() const {
+  // Formed once even when the first calls come from several threads at once (the searches of
+  // plugins that run on the cores, parallel.h); every call takes the lock, a cost far below the
+  // simulation or projection each call serves.
+  static std::mutex forming;
+  std::lock_guard<std::mutex> lock(forming);
   if (!basis) {
     if (!factors) throw std::logic_error("Fit::Q: the fit was made without want_basis");
     basis = std::make_shared<const Eigen::MatrixXd>(factors->basis_times(Eigen::MatrixXd::Identity(rank, rank)));

@@ -69,7 +69,8 @@ struct Fit {
   Eigen::VectorXd residual;   // y - F coef on the fit rows
   // The orthonormal basis of the determined columns on the fit rows (rows x rank), formed on
   // first use from the factorization the fit keeps (want_basis): most fits are trials that
-  // never need it, and forming it costs as much as the factorization.
+  // never need it, and forming it costs as much as the factorization. Safe to call from
+  // several threads.
   const Eigen::MatrixXd& Q() const;
   std::shared_ptr<const Factors> factors;
   mutable std::shared_ptr<const Eigen::MatrixXd> basis;

@@ -119,6 +119,9 @@ struct Candidate {
 };
 
 bool is_stateful(const spml_force_plugin& p);   // #22: advance/reset and no regressor
+// Whether a candidate's plugin calls must stay on one thread (parallel_for's `serial`): unless
+// its library flags the instances independent, each thread then walking its own.
+inline bool one_thread(const Candidate& c) { return !force_plugin_independent(*c.plugin); }
 
 // `parameters`' part of the edits: joint attributes, body inertials, and the declared plugins'
 // own texts with their re-identified parameters (identified_model_edits).
@@ -384,6 +387,7 @@ class Diagnosis {
   void add_stateful_candidates(const spml_force_plugin& p);
   BlockColumns simulated_columns(const PluginInstance& inst, const SplitData& s) const;
   double stateful_drop(const Candidate& c, const Fit& current, const std::vector<double>& x, Eigen::VectorXd* force = nullptr) const;
+  std::vector<double> drops_at(const Candidate& c, const Fit& current, const std::vector<std::vector<double>>& points) const;
   void fit_stateful(Candidate& c, const Fit& current);
   std::map<std::string, double> static_start(const Candidate& c, const Fit& current) const;
   double scan_shape_keys(const Candidate& c, const Fit& current, const std::vector<bool>& level, const std::vector<double>& lb,

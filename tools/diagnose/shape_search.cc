@@ -10,7 +10,6 @@
 
 #include "diagnosis.h"
 #include "parallel.h"
-#include "spml/force_effects.h"
 
 namespace spml::diagnose_detail {
 namespace {
@@ -184,8 +183,7 @@ double Diagnosis::search_shape(Candidate& c, const Fit& current) {
   }
   ShapeSearch s{evaluate, c, ns == 1 ? 40 : ns == 2 ? 16 : 6, {}, -1};
   const auto axes = grid_axes(c, s.per_axis);
-  current.Q();   // formed once here: the grid's points project on it from several threads
-  grid_scan(s, axes, !(force_plugin_flags(*c.plugin) & SPML_FORCE_INDEPENDENT));
+  grid_scan(s, axes, one_thread(c));
   if (s.best_drop < 0) {
     c.gain = Gain{};
     return 0;

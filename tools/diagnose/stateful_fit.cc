@@ -26,7 +26,6 @@
 
 #include "diagnosis.h"
 #include "parallel.h"
-#include "spml/force_effects.h"
 #include "spml/parse.h"
 #include "statistics.h"
 
@@ -64,10 +63,6 @@ Eigen::VectorXd log_derivative(const ForceAt& force, const std::vector<double>& 
 }  // namespace
 
 bool is_stateful(const spml_force_plugin& p) { return !p.regressor && p.advance && p.reset; }
-
-// Whether a candidate's simulations must stay on one thread (parallel_for's `serial`): unless
-// its library flags the plugin's instances independent, and each thread walks its own.
-static bool one_thread(const Candidate& c) { return !(force_plugin_flags(*c.plugin) & SPML_FORCE_INDEPENDENT); }
 
 // A level key (fc, fs, sigma2: no shape parameter of the plugin's own, ranged by the fit).
 bool Diagnosis::is_level(const spml_shape_param* sp) const {
@@ -209,6 +204,14 @@ double Diagnosis::stateful_drop(const Candidate& c, const Fit& current, const st
   }
 }
 
+// stateful_drop at every point, on the cores where the plugin allows (one_thread): each point
+// into its own slot, so a caller that picks among them in index order picks as on one thread.
+std::vector<double> Diagnosis::drops_at(const Candidate& c, const Fit& current, const std::vector<std::vector<double>>& points) const {
+  std::vector<double> drop(points.size());
+  parallel_for(points.size(), [&](size_t i) { drop[i] = stateful_drop(c, current, points[i]); }, one_thread(c));
+  return drop;
+}
+
 // Start values from the static candidates on the same joint, searched in the same round
 // before it: a key of the stateful plugin named like a parameter or shape key of a static one
 // (LuGre's fc, fs, vs and stribeck's) starts at that candidate's value, fitted on the current
@@ -247,9 +250,8 @@ double Diagnosis::scan_shape_keys(const Candidate& c, const Fit& current, const 
   for (size_t k = 0; k < x.size(); ++k) {
     if (level[k]) continue;
     std::vector<std::vector<double>> trial(9, x);
-    std::vector<double> drop(trial.size());
     for (size_t i = 0; i < trial.size(); ++i) trial[i][k] = lb[k] + (ub[k] - lb[k]) * static_cast<double>(i) / 8.0;
-    parallel_for(trial.size(), [&](size_t i) { drop[i] = stateful_drop(c, current, trial[i]); }, one_thread(c));
+    const std::vector<double> drop = drops_at(c, current, trial);
     double keep = x[k];
     for (size_t i = 0; i < trial.size(); ++i)
       if (drop[i] > best) best = drop[i], keep = trial[i][k];
@@ -263,21 +265,20 @@ void Diagnosis::fit_stateful(Candidate& c, const Fit& current) {
   if (fit_.split.t.size() != fit_.N) throw PluginError("no time stamps: a stateful effect cannot be integrated along the fit split");
   const size_t ns = c.shape.size();
   auto [lb, ub, level] = stateful_space(c);
-  current.Q();   // formed once here: the simulations below project on it from several threads
   std::vector<double> x(ns);
   for (size_t k = 0; k < ns; ++k) x[k] = 0.5 * (lb[k] + ub[k]);
   // The common level of the non-shape keys: a scan from 1 % to 3x the residual's RMS on the joint.
   const int o = static_cast<int>(std::find(out_joint_index_.begin(), out_joint_index_.end(), c.joint) - out_joint_index_.begin());
   const double rms = std::sqrt(current.residual.segment(o * fit_.N, fit_.N).squaredNorm() / static_cast<double>(fit_.N));
   double best_level = rms, best = -std::numeric_limits<double>::infinity();
-  std::vector<double> scale(16), drop(scale.size());
+  std::vector<double> scale(16);
   std::vector<std::vector<double>> at(scale.size(), x);
   for (size_t i = 0; i < scale.size(); ++i) {
     scale[i] = rms * std::pow(10.0, -2.0 + 2.5 * static_cast<double>(i) / 15.0);
     for (size_t k = 0; k < ns; ++k)
       if (level[k]) at[i][k] = std::log(scale[i]);
   }
-  parallel_for(scale.size(), [&](size_t i) { drop[i] = stateful_drop(c, current, at[i]); }, one_thread(c));
+  const std::vector<double> drop = drops_at(c, current, at);
   for (size_t i = 0; i < scale.size(); ++i)
     if (drop[i] > best) best = drop[i], best_level = scale[i];
   for (size_t k = 0; k < ns; ++k)
@@ -342,21 +343,19 @@ std::vector<double> Diagnosis::grid_start(const Candidate& c, const Fit& current
   size_t total = 1;
   for (size_t i = 0; i < keys.size(); ++i) total *= kPerKey;
   if (keys.empty() || total > 2401) return {};
-  auto point = [&](size_t idx) {
-    std::vector<double> p = x;
+  std::vector<std::vector<double>> points(total, x);
+  for (size_t idx = 0; idx < total; ++idx) {
     size_t rest = idx;
     for (size_t k : keys) {
-      p[k] = lb[k] + (ub[k] - lb[k]) * (static_cast<double>(rest % kPerKey) + 0.5) / kPerKey;
+      points[idx][k] = lb[k] + (ub[k] - lb[k]) * (static_cast<double>(rest % kPerKey) + 0.5) / kPerKey;
       rest /= kPerKey;
     }
-    return p;
-  };
-  std::vector<double> drop(total);
-  parallel_for(total, [&](size_t idx) { drop[idx] = stateful_drop(c, current, point(idx)); }, one_thread(c));
+  }
+  const std::vector<double> drop = drops_at(c, current, points);
   std::vector<double> best;
   double best_drop = -std::numeric_limits<double>::infinity();
   for (size_t idx = 0; idx < total; ++idx)
-    if (drop[idx] > best_drop) best_drop = drop[idx], best = point(idx);
+    if (drop[idx] > best_drop) best_drop = drop[idx], best = points[idx];
   return best;
 }
 
@@ -424,7 +423,6 @@ std::vector<std::string> Diagnosis::profile_stateful(const Candidate& c, const F
                                                      const std::vector<double>& lb, const std::vector<double>& ub,
                                                      const std::vector<double>& x) const {
   const size_t ns = x.size();
-  current.Q();   // formed once here: the points below project on it from several threads
   // A level the fit declares 0 (settle_levels: the data do not need it, LuGre's sigma2 beside
   // the MJCF's damping) is not part of the effect: held at its floor, not profiled. (Free, its
   // two points and its place in every polish cost a quarter of the profile: 3.5 s against 2.6

@@ -54,6 +54,8 @@ std::vector<std::string> available_force_plugins();
 // force_plugins() (0 for a descriptor not found there).
 uint32_t force_plugin_flags(const spml_force_plugin& plugin, int revision);
 uint32_t force_plugin_flags(const spml_force_plugin& plugin);
+// Whether two instances may run on two threads at once: SPML_FORCE_INDEPENDENT among the above.
+inline bool force_plugin_independent(const spml_force_plugin& plugin) { return (force_plugin_flags(plugin) & SPML_FORCE_INDEPENDENT) != 0; }
 // How force-plugin libraries are recognised (symbol prefix, ABI version, search folders).
 const PluginKind& force_plugin_kind();
 // "" for a descriptor the host can use, else what is wrong with it (required callbacks
