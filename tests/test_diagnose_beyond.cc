@@ -438,10 +438,11 @@ enum class BreakAway {
 
 // LuGre draw s of make_draw's family, its excitation's top frequency f_high (0: the default
 // band, 0.1-1 Hz): `stick_slip` named on its joint, fc within 20 %, fs as `fs` says. Returns
-// the report.
-nlohmann::json expect_stick_slip(const std::filesystem::path& dir, int s, double f_high, BreakAway fs) {
+// the report. `lowpass_hz`: the import's band.
+nlohmann::json expect_stick_slip(const std::filesystem::path& dir, int s, double f_high, BreakAway fs, double lowpass_hz = 10) {
   Measurement m;
   m.f_high = f_high;
+  m.lowpass_hz = lowpass_hz;
   const Draw d = make_draw(dir, "lugre", s, 0, m);
   const auto r = run_draw(dir, d, s);
   const auto causes = named(r);
@@ -514,6 +515,35 @@ TEST(DiagnoseBeyond, ABreakAwayTheLowPassHidesIsNotStatedAsDetermined) {
   SPML_SKIP_UNDER_SANITIZERS();
   const auto dir = test::temp_dir("lugre_hidden_break");
   for (int s : {222, 228, 204, 210}) expect_stick_slip(dir, s, 0, BreakAway::within_20_or_said_free);
+}
+
+// What the import's band does to LuGre's break-away (the seed table's 30 draws, 1 kHz
+// decimated to 200 Hz: fc and fs within 20 % on 18 through the 10 Hz import, 2 of them named
+// `coulomb`; on 22 through 20 Hz and 25 through 40 Hz, none missed). Draw 202 through 10 Hz:
+// a Stribeck speed crossed at the reversals in 2.7 ms, fs 0.77 of the truth, not identifiable,
+// and the cause's `resolution` says the band is the limit and which one resolves a speed that
+// small; the same draw through 40 Hz: fs within 20 % and determined, no such note.
+const nlohmann::json* live_cause(const nlohmann::json& r, const std::string& effect) {
+  for (const auto& c : r["causes"])
+    if (c["effect"] == effect && !c.contains("superseded_by")) return &c;
+  return nullptr;
+}
+
+TEST(DiagnoseBeyond, ABreakAwayTheBandSmearsSaysWhichBandResolvesIt) {
+  SPML_SKIP_UNDER_SANITIZERS();
+  const auto r10 = expect_stick_slip(test::temp_dir("lugre_band10"), 202, 0, BreakAway::said_free);
+  const nlohmann::json* c10 = live_cause(r10, "stick_slip");
+  ASSERT_NE(c10, nullptr);
+  ASSERT_TRUE(c10->contains("resolution")) << c10->dump();
+  const std::string note = (*c10)["resolution"].get<std::string>();
+  std::cout << "  10 Hz: " << note << "\n";
+  const auto at = note.find("a low-pass of ");
+  ASSERT_NE(at, std::string::npos) << note;
+  EXPECT_GT(std::stod(note.substr(at + 14)), 10) << note;
+  const auto r40 = expect_stick_slip(test::temp_dir("lugre_band40"), 202, 0, BreakAway::within_20_percent, 40);
+  const nlohmann::json* c40 = live_cause(r40, "stick_slip");
+  ASSERT_NE(c40, nullptr);
+  EXPECT_FALSE(c40->contains("resolution")) << c40->dump();
 }
 
 // Seed-table draws whose LuGre fit ran to an end: 202's Stribeck speed to the bottom of its
@@ -1055,13 +1085,14 @@ TEST(DiagnoseBeyond, DISABLED_SeedTable) {
     for (const auto& cause : r["causes"])
       std::cout << "   cause " << cause["effect"] << " " << cause["joints"].dump() << " " << cause.value("params", nlohmann::json()).dump()
                 << (cause.contains("superseded_by") ? " superseded" : "")
-                << (cause.contains("not_identifiable") ? " not identifiable " + cause["not_identifiable"].dump() : "") << "\n";
+                << (cause.contains("not_identifiable") ? " not identifiable " + cause["not_identifiable"].dump() : "")
+                << (cause.contains("resolution") ? "\n     resolution: " + cause["resolution"].get<std::string>() : "") << "\n";
     for (const auto& u : r["unexplained"])
       std::cout << "   unexplained " << u["joint"] << " top " << u["inputs"][0] << " share " << u["share"] << " explained_rmse "
                 << std::sqrt(std::pow(u["rmse_test"].get<double>(), 2) - std::pow(u["rmse_test_with_gp"].get<double>(), 2)) << " noise_rmse " << u["noise_rmse"] << "\n";
     for (const auto& t : r["not_tried"])
       if (t.value("joint", "") == "j" + std::to_string(d.joint) && t.value("effect", "") == "stick_slip")
-        std::cout << "   not tried " << t["reason"] << "\n";
+        std::cout << "   not tried " << t["reason"] << (t.contains("resolution") ? "\n     resolution: " + t["resolution"].get<std::string>() : "") << "\n";
     std::cout << "   rollout worse_on " << r["rollout"]["worse_on"].dump() << "; held-out relative error on j" << d.joint << " "
               << r["baseline"]["rel_error_test"]["j" + std::to_string(d.joint)] << " as given, " << r["final"]["rel_error_test"]["j" + std::to_string(d.joint)] << " written\n";
     double held = 0, roll = 0;   // geometric means over the joints of written / as given

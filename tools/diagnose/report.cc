@@ -166,6 +166,7 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
     } else if (c.value("written_as", "") == "plugin") {
       s << "   - in extended.xml as an spml plugin declaration (plain MuJoCo ignores it)\n";
     }
+    if (c.contains("resolution")) s << "   - " << c["resolution"].get<std::string>() << "\n";
     if (c.contains("not_identifiable") && !c["not_identifiable"].empty() && c["effect"] == "parameters")
       s << "   - not identifiable from this data: " << c["not_identifiable"].size() << " base parameter(s)\n";
   }

@@ -286,6 +286,7 @@ void Diagnosis::build_report(const std::string& out_dir) {
       stateful_keys(c, params, se);
       tried.push_back({{"effect", c.plugin->name}, {"joint", c.joint_name}, {"reason", c.lost_to_static}, {"not_identifiable", c.not_identifiable},
                        {"params", params}, {"stderr", se}});
+      if (!c.resolution.empty()) tried.back()["resolution"] = c.resolution;
     }
   }
   R["not_tried"] = tried;
