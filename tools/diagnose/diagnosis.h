@@ -109,7 +109,7 @@ struct Candidate {
   bool break_away_loose = false;              // joins only by rolling out closer (rolls_out_better): a small loose gap of a level (profile_once), a key at an end (settle_levels)
   std::string at_range_end;                   // settle_levels: the keys at an end of their range or at the plugin's edge
   std::string lost_to_static;                 // the last held-out comparison it lost to the static frictions (note_lost), for not_tried
-  std::string resolution;                     // profile_once: a speed key the parallel filter smears, and the band that would resolve it
+  std::string resolution;                     // profile_once: the Stribeck hump's loose keys, the speeds the parallel filter resolves, and a band that resolves more
 
   // Is key (of shape key k) in not_identifiable; put it there once.
   bool loose(const std::string& key) const { return std::find(not_identifiable.begin(), not_identifiable.end(), key) != not_identifiable.end(); }
@@ -408,7 +408,7 @@ class Diagnosis {
   bool gap_loose(const Candidate& c, size_t k, size_t principal) const;
   double reversal_crossing(int joint, double v) const;
   bool unresolved_speed(int joint, double v) const;
-  std::string resolution_note(int joint, const std::string& key, double v) const;
+  std::string resolution_note(int joint, const std::string& keys) const;
   bool shaped(const Candidate& c) const;
   bool beats_static(const Candidate& c, double bar, double rss) const;
   double stateful_gain(const Candidate& c) const;   // the held-out gain beats_static asks of it

@@ -34,14 +34,14 @@ double excitation_band(const std::vector<Eigen::VectorXd>& q, double rate) {
   return 0;
 }
 
-// K of import's decimation record (1: none, or not understood).
+
+}  // namespace
+
 double decimated_by(const Dataset& ds) {
   const auto it = ds.provenance.find("decimation");
   const auto d = it == ds.provenance.end() ? std::nullopt : parse_decimation_record(it->second);
   return d ? d->keep : 1;
 }
-
-}  // namespace
 
 FilterPlan plan_filter(const Dataset& ds, const std::vector<Eigen::VectorXd>& q, const std::vector<Eigen::VectorXd>& qdd,
                        const std::vector<Eigen::VectorXd>& residual, double rate_hz, std::vector<std::string>& notes) {

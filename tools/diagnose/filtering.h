@@ -37,6 +37,9 @@ struct FilterPlan {
 FilterPlan plan_filter(const Dataset& ds, const std::vector<Eigen::VectorXd>& q, const std::vector<Eigen::VectorXd>& qdd,
                        const std::vector<Eigen::VectorXd>& residual, double rate_hz, std::vector<std::string>& notes);
 
+// K of the dataset's decimation record (1: none, or not understood).
+double decimated_by(const Dataset& ds);
+
 // The sections for one split (empty when the plan is none, the split has no time stamps, or
 // the cut-off lies at or above 0.4 of its sampling rate: nothing left to filter).
 std::vector<Section> plan_sections(const FilterPlan& plan, const Split& s);
