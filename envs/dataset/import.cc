@@ -443,17 +443,6 @@ double condition(const Conditioning& c, const std::string& source, Eigen::Vector
           << 0.5 / dt << " Hz (the time column's median step is " << dt << " s)";
       fail(msg.str());
     }
-    // A band the decimation does not keep is recorded as one the data do not have, and
-    // consumers filtering their columns alike skip a filter at or above 0.4 of the rate (a
-    // review: --lowpass 150 --decimate 5 at 1 kHz, recorded as 150 Hz, kept 80 Hz; diagnose
-    // filtered nothing and named `coulomb` for LuGre).
-    if (c.decimate > 1 && !(c.lowpass_hz < anti_alias_cutoff(c, dt))) {
-      std::ostringstream msg;
-      msg << source << ": --lowpass " << c.lowpass_hz << " Hz lies above what --decimate " << c.decimate << " keeps ("
-          << anti_alias_cutoff(c, dt) << " Hz, 0.4 of the decimated rate): lower --lowpass, or --decimate to at most "
-          << std::max(1, static_cast<int>(std::ceil(kAntiAliasShare * 0.5 / (dt * c.lowpass_hz))) - 1);
-      fail(msg.str());
-    }
     const auto sos = butterworth_lowpass(c.filter_order, c.lowpass_hz, 1.0 / dt);
     settle = settling_samples(sos);
     for (auto* cols : {&xs, &ys})
