@@ -380,6 +380,11 @@ Table read_text_logs(const std::vector<std::string>& specs) {
   return t;
 }
 
+// The floor is nudged: 1 / median step reads 999.99... at 1 kHz.
+int suggested_decimation(double rate_hz, double lowpass_hz) {
+  return static_cast<int>(std::floor(rate_hz / std::max(200.0, 10 * lowpass_hz) + 1e-6));
+}
+
 namespace {
 
 // The uniform grid with step dt over t's span. A time stamp far off the others (one stray
@@ -497,7 +502,7 @@ double condition(const Conditioning& c, const std::string& source, Eigen::Vector
   // LuGre log with 3 joints kept at 1 kHz: 54 s, decimated to 200 Hz 12 s, the same causes).
   if (c.lowpass_hz > 0 && c.decimate == 1) {
     const double rate = 1.0 / dt;
-    const int k = static_cast<int>(std::floor(rate / std::max(200.0, 10 * c.lowpass_hz) + 1e-6));   // 1 / median step: 999.99... at 1 kHz
+    const int k = suggested_decimation(rate, c.lowpass_hz);
     if (k >= 2)
       std::cerr << "spml: note: " << source << ": the " << c.lowpass_hz << " Hz band is sampled at " << rate << " Hz; --decimate " << k
                 << " keeps it (" << rate / k << " Hz) and makes diagnose's fits by simulation about " << k << " times cheaper\n";

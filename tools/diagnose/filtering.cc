@@ -34,7 +34,6 @@ double excitation_band(const std::vector<Eigen::VectorXd>& q, double rate) {
   return 0;
 }
 
-
 }  // namespace
 
 double decimated_by(const Dataset& ds) {

@@ -26,6 +26,7 @@
 
 #include "diagnosis.h"
 #include "parallel.h"
+#include "spml/import.h"
 #include "spml/parse.h"
 #include "statistics.h"
 
@@ -699,8 +700,7 @@ std::string Diagnosis::resolution_note(int joint, const std::string& keys) const
   if (!imported || fit_.split.t.size() < 2) return s;
   const double rate = 1 / median_step(fit_.split.t), logged = rate * decimated_by(ds_), wider = 4 * cutoff;
   if (!(wider < 0.4 * logged)) return s + "; this log's rate (" + fmt(logged) + " Hz as logged) holds no band much wider";
-  // The decimation spml import suggests for a band (a rate of 10 times it, 200 Hz at least).
-  const int keep = std::max(1, static_cast<int>(std::floor(logged / std::max(200.0, 10 * wider) + 1e-6)));
+  const int keep = std::max(1, suggested_decimation(logged, wider));
   return s + "; re-imported with --lowpass " + fmt(wider) + " --decimate " + std::to_string(keep) + " (from the log at " + fmt(logged) +
          " Hz), vs >= " + fmt(least(wider), 2) + " is resolved";
 }

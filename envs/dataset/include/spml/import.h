@@ -69,6 +69,10 @@ struct Conditioning {
   bool any() const { return lowpass_hz > 0 || derive || drop_edges > 0 || decimate > 1; }
 };
 
+// The decimation that keeps a band of `lowpass_hz` sampled at `rate_hz`: a rate of ten times
+// the band, 200 Hz at least (what spml import's note suggests; 1 or less: none).
+int suggested_decimation(double rate_hz, double lowpass_hz);
+
 struct ImportSpec {
   std::vector<std::string> x, y;
   std::string t;
