@@ -545,6 +545,21 @@ TEST(DiagnoseBeyond, ABreakAwayTheBandSmearsSaysWhichBandResolvesIt) {
   EXPECT_FALSE(c40->contains("resolution")) << c40->dump();
 }
 
+// `spml import --lowpass 150 --decimate 5` at 1 kHz: the decimation's anti-alias keeps 80 Hz,
+// and the dataset records the 150 Hz low-pass, which cannot run at 200 Hz. Read as the band,
+// it left every column unfiltered: draw 206 (a review's trap) was named `coulomb`, and fs was
+// reported not identifiable on the seed table's first 8 draws. Read as the decimation's band,
+// the accelerations' noise in it is found and filtered: `stick_slip`, fs within 20 %.
+TEST(DiagnoseBeyond, ALowPassAboveWhatTheDecimationKeptIsReadAsItsBand) {
+  SPML_SKIP_UNDER_SANITIZERS();
+  const auto r = expect_stick_slip(test::temp_dir("lugre_lowpass150"), 206, 0, BreakAway::within_20_percent, 150);
+  EXPECT_EQ(r["parallel_filter"]["source"], "detected") << r["parallel_filter"].dump();
+  EXPECT_TRUE(r["parallel_filter"]["applied"].get<bool>()) << r["parallel_filter"].dump();
+  bool said = false;
+  for (const auto& n : r["notes"]) said = said || n.get<std::string>().find("above the band its decimation kept (80 Hz at 200 Hz)") != std::string::npos;
+  EXPECT_TRUE(said) << r["notes"].dump();
+}
+
 // Seed-table draws whose LuGre fit ran to an end: 202's Stribeck speed to the bottom of its
 // range, 226's fs to fc with both levels determined. Each was refused for that and `coulomb`
 // named, whose written model predicts the joint several times worse. Such keys are not

@@ -96,7 +96,7 @@ void Diagnosis::add_candidates(const spml_force_plugin& p, const std::vector<con
 // joint's median speed). False (with a note) when nothing is left to search.
 bool Diagnosis::bound_wavenumber(Candidate& c, double stroke, double median_speed) {
   const double dt = fit_.split.t.size() == fit_.split.rows() && fit_.split.rows() > 1 ? median_step(fit_.split.t) : 0;
-  const double band_hz = !fit_.sos.empty() ? filter_plan_.lowpass.cutoff_hz : dt > 0 ? 0.4 / dt : 0;
+  const double band_hz = !fit_.sos.empty() ? filter_plan_.lowpass.cutoff_hz : dt > 0 ? kWidestLowpassShare / dt : 0;
   for (size_t k = 0; k < c.shape.size(); ++k) {
     if (std::string(c.shape[k]->key) != "gear") continue;
     auto& [lo, hi] = c.shape_range[k];

@@ -49,25 +49,37 @@ FilterPlan plan_filter(const Dataset& ds, const std::vector<Eigen::VectorXd>& q,
   const bool differences = derived != ds.provenance.end() && derived->second == "central-difference";
   const auto it = ds.provenance.find("filter");
   if (it != ds.provenance.end()) {
-    if (const auto rec = parse_lowpass_record(it->second)) {
+    const auto rec = parse_lowpass_record(it->second);
+    const double kept = kWidestLowpassShare * rate_hz;
+    if (rec && decimated_by(ds) > 1 && rate_hz > 0 && rec->cutoff_hz >= kept) {
+      // The decimation's anti-alias kept less than the recorded low-pass passes (--lowpass 150
+      // --decimate 5 at 1 kHz keeps 80 Hz; EMPS's published 100 Hz before decimating by 10, 40
+      // Hz): that low-pass can no longer be run at this rate, and reading it as the band left the
+      // data unfiltered - LuGre named `coulomb` in a review. The band kept is the decimation's,
+      // as if no low-pass were recorded: noise in it is looked for below.
+      notes.push_back("the dataset records a low-pass at " + text(rec->cutoff_hz) + " Hz ('" + it->second +
+                      "'), above the band its decimation kept (" + text(kept) + " Hz at " + text(rate_hz) +
+                      " Hz): the band is the decimation's, and noise in it is looked for as in a dataset that records no low-pass");
+    } else if (rec) {
       plan.source = FilterPlan::Source::recorded;
       plan.lowpass = *rec;
       // A low-pass at or above 0.4 of the rate it ran at (before a decimation) smoothed next to
       // nothing (--lowpass 450 at 1 kHz, decimated 6: a delay of +2.9 ms named on clean data).
-      plan.raw_differences = differences && rate_hz > 0 && rec->cutoff_hz >= 0.4 * rate_hz * decimated_by(ds);
+      plan.raw_differences = differences && rate_hz > 0 && rec->cutoff_hz >= kWidestLowpassShare * rate_hz * decimated_by(ds);
       plan.description = "the dataset records the low-pass it went through ('" + it->second +
                          "'): every model and candidate column is filtered alike (parallel filtering); the torques already were";
       return plan;
+    } else {
+      notes.push_back("the dataset's filter attribute '" + it->second + "' is not understood: no parallel filtering");
+      return plan;
     }
-    notes.push_back("the dataset's filter attribute '" + it->second + "' is not understood: no parallel filtering");
-    return plan;
   }
   plan.raw_differences = differences;
   if (!(rate_hz > 0)) return plan;
   const double band = excitation_band(q, rate_hz);
   if (!(band > 0)) return plan;
   const double cutoff = 5 * band;
-  if (!(cutoff < 0.4 * rate_hz)) return plan;
+  if (!(cutoff < kWidestLowpassShare * rate_hz)) return plan;
   // Two signs of noise above the band, either enough: the accelerations' own power there
   // (differences of noisy positions), or the model's error there - noise in the accelerations
   // that is small beside their signal can still be most of what the model as given misses
@@ -97,7 +109,7 @@ FilterPlan plan_filter(const Dataset& ds, const std::vector<Eigen::VectorXd>& q,
 std::vector<Section> plan_sections(const FilterPlan& plan, const Split& s) {
   if (plan.source == FilterPlan::Source::none || s.t.size() != s.rows() || s.rows() < 3) return {};
   const double dt = median_step(s.t);
-  if (!(dt > 0) || plan.lowpass.cutoff_hz >= 0.4 / dt) return {};
+  if (!(dt > 0) || plan.lowpass.cutoff_hz >= kWidestLowpassShare / dt) return {};
   return butterworth_lowpass(plan.lowpass.order, plan.lowpass.cutoff_hz, 1.0 / dt);
 }
 

@@ -16,6 +16,10 @@ namespace spml::diagnose_detail {
 
 using Section = Eigen::Matrix<double, 5, 1>;
 
+// The widest low-pass worth running: at or above this share of the sampling rate a zero-phase
+// Butterworth leaves next to nothing out (and spml import's anti-alias keeps just this much).
+constexpr double kWidestLowpassShare = 0.4;
+
 struct FilterPlan {
   enum class Source { none, recorded, detected } source = Source::none;
   LowpassRecord lowpass;

@@ -699,7 +699,7 @@ std::string Diagnosis::resolution_note(int joint, const std::string& keys) const
                   fmt(1e3 * kResolvedCrossing / cutoff, 3) + " ms or more); a narrower one leaves its area in the data, not its height and width";
   if (!imported || fit_.split.t.size() < 2) return s;
   const double rate = 1 / median_step(fit_.split.t), logged = rate * decimated_by(ds_), wider = 4 * cutoff;
-  if (!(wider < 0.4 * logged)) return s + "; this log's rate (" + fmt(logged) + " Hz as logged) holds no band much wider";
+  if (!(wider < kWidestLowpassShare * logged)) return s + "; this log's rate (" + fmt(logged) + " Hz as logged) holds no band much wider";
   const int keep = std::max(1, suggested_decimation(logged, wider));
   return s + "; re-imported with --lowpass " + fmt(wider) + " --decimate " + std::to_string(keep) + " (from the log at " + fmt(logged) +
          " Hz), vs >= " + fmt(least(wider), 2) + " is resolved";
