@@ -245,10 +245,34 @@ TEST(Hardening, ImportSuggestsTheDecimationThatKeepsTheBand) {
   EXPECT_EQ(decimated.output.find("note:"), std::string::npos) << decimated.output;
 }
 
+// Conditioning that leaves nothing usable is refused with the option named, and no file
+// written (a review's --decimate 40000 wrote a one-row dataset; its --lowpass 1e-3 was told
+// to drop more samples than the log had): 3000 rows at 1 kHz.
+TEST(Hardening, ImportRefusesConditioningThatLeavesNoUsableRow) {
+  {
+    std::ofstream log(f("short.csv"));
+    log << "t,q:j,tau:j\n";
+    for (int i = 0; i < 3000; ++i) log << i * 1e-3 << "," << std::sin(2.0 * i * 1e-3) << "," << std::cos(2.0 * i * 1e-3) << "\n";
+  }
+  const std::string import = spml("import " + f("short.csv") + " --t t --x q:j --y tau:j --derive -o " + f("short.h5"));
+  const auto one_row = run(import + " --decimate 40000");
+  EXPECT_NE(one_row.exit_code, 0) << one_row.output;
+  EXPECT_NE(one_row.output.find("--decimate 40000 keeps 1 row of the 3000 left after --drop-edges; at most 1499 keeps 3"), std::string::npos)
+      << one_row.output;
+  const auto slow = run(import + " --lowpass 1e-3");
+  EXPECT_NE(slow.exit_code, 0) << slow.output;
+  EXPECT_NE(slow.output.find("--lowpass 0.001 Hz: its start-up transient reaches"), std::string::npos) << slow.output;
+  EXPECT_NE(slow.output.find("so no row is free of it"), std::string::npos) << slow.output;
+  EXPECT_FALSE(fs::exists(f("short.h5")));
+  // The bounds themselves pass: 3 rows kept; a cut-off whose transient stays within the log.
+  EXPECT_EQ(run(import + " --decimate 1499").exit_code, 0);
+  EXPECT_EQ(run(import + " --lowpass 5 --drop-edges 1224").exit_code, 0);
+}
+
 // Output that never reached its file is a failure: a --json document into a full device.
 TEST(Hardening, StandardOutputThatCannotBeWrittenIsAnError) {
   if (!fs::exists("/dev/full")) GTEST_SKIP() << "no /dev/full on this machine";
-  for (const std::string cmd : {std::string("learners --json"), std::string("plugins --json"), "regressor --model " + mjcf("planar_arm3.xml") + " --json"})
+  for (const std::string& cmd : {std::string("learners --json"), std::string("plugins --json"), "regressor --model " + mjcf("planar_arm3.xml") + " --json"})
     expect_error("(" + spml(cmd) + " >/dev/full)", 1, {"could not write standard output"});   // stderr stays on the pipe
 }
 

@@ -219,6 +219,10 @@ void Diagnosis::forward_backward() {
       // tried in its place: beside it, the shared direction splits between the two at the
       // rounding's whim, and a part that falls negative was refused as energy-feeding friction
       // (fc_pos -0.015 beside Coulomb 0.093, where the two sum to the hidden 0.084).
+      // A static friction that a chosen stateful one nests joins not beside it: LuGre's steady
+      // state is that friction (a review's elbow, `stribeck` of fc 0.040 beside `stick_slip`,
+      // neither superseded; the README's rule had covered only the other order).
+      if (std::any_of(chosen.begin(), chosen.end(), [&](int q) { return cands_[static_cast<size_t>(q)].stateful && nests(q, order[i]); })) continue;
       const std::vector<int> trial = in_place(order[i], chosen);
       Fit f = refit(trial, true);
       Eigen::Index off = f.coef.size() - cands_[static_cast<size_t>(order[i])].fit_cols.cols;
