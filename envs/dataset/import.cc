@@ -450,18 +450,6 @@ double condition(const Conditioning& c, const std::string& source, Eigen::Vector
     }
     const auto sos = butterworth_lowpass(c.filter_order, c.lowpass_hz, 1.0 / dt);
     settle = settling_samples(sos);
-    // A cut-off whose start-up transient reaches past the log's middle leaves no row free of it
-    // (a review's --lowpass 1e-3 was told to drop more samples than the log had). The settling
-    // scales with the period of the cut-off: the least cut-off that settles within a quarter
-    // of the log is said.
-    if (2 * settle >= t.size()) {
-      std::ostringstream msg;
-      msg << source << ": --lowpass " << c.lowpass_hz << " Hz: its start-up transient reaches " << settle << " samples ("
-          << static_cast<double>(settle) * dt << " s) into each end of a log of " << t.size()
-          << " rows, so no row is free of it; a cut-off of about " << c.lowpass_hz * static_cast<double>(settle) / (0.25 * static_cast<double>(t.size()))
-          << " Hz or more settles within a quarter of the log";
-      fail(msg.str());
-    }
     for (auto* cols : {&xs, &ys})
       for (size_t k = 0; k < cols->size(); ++k) {
         Eigen::VectorXd& col = (*cols)[k];
@@ -503,14 +491,23 @@ double condition(const Conditioning& c, const std::string& source, Eigen::Vector
   if (2 * drop >= n) fail(source + ": --drop-edges " + std::to_string(drop) + " leaves no rows of " + std::to_string(n));
   // Fewer than 3 rows hold no time step to difference or interpolate (a review's --decimate
   // 40000 wrote a one-row dataset).
-  if (const Eigen::Index kept = (n - 2 * drop + c.decimate - 1) / c.decimate; kept < 3)
+  if (const Eigen::Index kept = (n - 2 * drop + c.decimate - 1) / c.decimate; c.decimate > 1 && kept < 3)
     fail(source + ": --decimate " + std::to_string(c.decimate) + " keeps " + std::to_string(kept) + " row" + (kept == 1 ? "" : "s") + " of the " +
          std::to_string(n - 2 * drop) + " left after --drop-edges; at most " + std::to_string((n - 2 * drop - 1) / 2) + " keeps 3");
   // Where a log ends while the robot moves, the low-pass starts with a transient that its
   // derivatives amplify: with 50 samples dropped after a 20 Hz pass at 1 kHz (307 to settle),
   // a review's log kept a 2.5 N m error in its last 0.1 s, and diagnose missed a 3 ms delay.
   // Said when it exceeds 1 % of a kept column's RMS (a log that starts and ends at rest has none).
-  if (transient > 0.01)
+  // Where the transient reaches past the log's middle no drop helps (a review's --lowpass 1e-3
+  // was told to drop more samples than the log had): the cut-off that settles within a quarter
+  // of the log is said instead (the settling scales with the cut-off's period).
+  if (transient > 0.01 && 2 * settle >= n)
+    std::cerr << "spml: warning: " << source << ": --lowpass " << c.lowpass_hz << " Hz: its start-up transient (up to "
+              << std::lround(100 * transient) << " % of the RMS of " << transient_column << ") reaches " << settle << " samples ("
+              << static_cast<double>(settle) * dt << " s) into each end of a log of " << n
+              << " rows, so no drop leaves a row free of it; a cut-off of about " << c.lowpass_hz * static_cast<double>(settle) / (0.25 * static_cast<double>(n))
+              << " Hz or more settles within a quarter of the log\n";
+  else if (transient > 0.01)
     std::cerr << "spml: warning: " << source << ": --drop-edges " << drop << " keeps part of the low-pass's start-up transient (up to "
               << std::lround(100 * transient) << " % of the RMS of " << transient_column << " in the rows kept), which reaches " << settle
               << " samples (" << static_cast<double>(settle) * dt << " s) into each end of the log: drop at least " << settle << "\n";
