@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include "spml/dataset.h"
+#include "spml/signal.h"
 
 #include "spml/learners/results.h"
 #include "test_util.h"
@@ -257,17 +258,31 @@ TEST(Hardening, ImportSaysWhatLeavesNoUsableRow) {
   const std::string import = spml("import " + f("short.csv") + " --t t --x q:j --y tau:j --derive -o " + f("short.h5"));
   const auto one_row = run(import + " --decimate 40000");
   EXPECT_NE(one_row.exit_code, 0) << one_row.output;
-  EXPECT_NE(one_row.output.find("--decimate 40000 keeps 1 row of the 3000 left after --drop-edges; at most 1499 keeps 3"), std::string::npos)
+  EXPECT_NE(one_row.output.find("--decimate 40000 keeps 1 row of the 3000 rows; at most 1499 keeps 3"), std::string::npos)
       << one_row.output;
   EXPECT_FALSE(fs::exists(f("short.h5")));
   EXPECT_EQ(run(import + " --decimate 1499").exit_code, 0);   // the bound itself: 3 rows
+  const auto split = run(import + " --decimate 700 --split train:0:64% --split test:64%:");   // 5 rows: 3 and 2
+  EXPECT_NE(split.exit_code, 0) << split.output;
+  EXPECT_NE(split.output.find("split 'test': --decimate 700 leaves it 2 rows (of 5 kept); a split needs 3"), std::string::npos) << split.output;
   // A cut-off whose transient reaches past the middle is the user's to choose (a short log may
   // need it), but no drop is advised that the log cannot give: the cut-off that settles is.
   const auto slow = run(import + " --lowpass 1e-3");
   EXPECT_EQ(slow.exit_code, 0) << slow.output;
   EXPECT_NE(slow.output.find("--lowpass 0.001 Hz: its start-up transient"), std::string::npos) << slow.output;
-  EXPECT_NE(slow.output.find("so no drop leaves a row free of it; a cut-off of about"), std::string::npos) << slow.output;
   EXPECT_EQ(slow.output.find("drop at least"), std::string::npos) << slow.output;
+  // The cut-off it names does settle within a quarter of the log (a first form scaled 1e-3 Hz
+  // by a capped settling and named 0.14 Hz, whose transient outlasts the log), and the size of
+  // a transient that dwarfs the signal is said as such (1e-12 Hz had overflowed to -9e18 %).
+  const std::string said = "so no drop leaves a row free of it; a cut-off of ";
+  const auto at = slow.output.find(said);
+  ASSERT_NE(at, std::string::npos) << slow.output;
+  const double named = std::stod(slow.output.substr(at + said.size()));
+  EXPECT_GT(named, 0.5);
+  EXPECT_LE(spml::settling_samples(spml::butterworth_lowpass(4, named, 1000)), 750);
+  EXPECT_GT(spml::settling_samples(spml::butterworth_lowpass(4, 0.98 * named, 1000)), 750);
+  const auto tiny = run(import + " --lowpass 1e-12");
+  EXPECT_EQ(tiny.output.find("-9223372036854775808"), std::string::npos) << tiny.output;
 }
 
 // Output that never reached its file is a failure: a --json document into a full device.

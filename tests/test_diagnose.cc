@@ -271,6 +271,10 @@ TEST(Diagnose, EmpsExampleReproducesThePublishedModels) {
   EXPECT_NEAR(whole["rel_error_after_each_cause"][at("offset")].get<double>(), 0.0408, 0.003) << r.output;
   EXPECT_NEAR(whole["rel_error_after_each_cause"][at("asymmetric_friction")].get<double>(), 0.0311, 0.003) << r.output;
   EXPECT_TRUE(std::filesystem::exists(dir / "extended.xml"));
+  // Its recorded 100 Hz low-pass lies above the 40 Hz the decimation kept: read as that band,
+  // where no noise is found, and report.json says why nothing is filtered.
+  EXPECT_EQ(rep["parallel_filter"]["source"], "none") << rep["parallel_filter"].dump();
+  EXPECT_NE(rep["parallel_filter"]["why"].get<std::string>().find("no noise lies above"), std::string::npos) << rep["parallel_filter"].dump();
   EXPECT_LT(rep["extended_check"]["max_abs_deviation"].get<double>(), 1e-6 * rep["extended_check"]["rms_torque"].get<double>());
   // The file left there holds the declaration (it once was the refit's scratch copy without
   // it: rollouts after = before, 1.07 mm), and its rollouts follow the carriage (0.03 mm).

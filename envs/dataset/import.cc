@@ -409,6 +409,28 @@ Eigen::VectorXd uniform_grid(const Eigen::VectorXd& t, double dt, const std::str
 // The decimation's low-pass: kAntiAliasShare of the Nyquist frequency after keeping every K-th.
 double anti_alias_cutoff(const Conditioning& c, double dt) { return kAntiAliasShare * 0.5 / (dt * c.decimate); }
 
+// The least cut-off (to 1 %) of an order-`order` low-pass at `rate` whose start-up transient
+// settles within `samples`: doubled from `from` until it does, then bisected in the logarithm.
+// (Scaling `from` by the settling ratio fails where the settling is capped: a review's 1e-3 Hz
+// pass named 0.14 Hz, whose transient is longer than its 30 000-row log.)
+double cutoff_settling_within(int order, double from, double rate, Eigen::Index samples) {
+  auto settles = [&](double f) { return settling_samples(butterworth_lowpass(order, f, rate)) <= samples; };
+  const double top = 0.45 * rate;
+  double lo = from, hi = from;
+  while (hi < top && !settles(hi)) lo = hi, hi = std::min(2 * hi, top);
+  if (hi >= top && !settles(hi)) return top;
+  while (hi > 1.01 * lo) {
+    const double mid = std::sqrt(lo * hi);
+    (settles(mid) ? hi : lo) = mid;
+  }
+  return hi;
+}
+
+// A transient's size as a percentage for a message (a 1e-12 Hz pass overflowed the rounding).
+std::string percent_text(double share) {
+  return share < 100 ? std::to_string(std::lround(100 * share)) : std::string("more than 10000");
+}
+
 // The start-up transient a low-pass pass leaves in the rows kept (`drop` cut at each end),
 // relative to their RMS: the pass against the same pass reflected over its whole settling
 // (no transient), on what the dataset will hold - a position's second difference where
@@ -493,7 +515,7 @@ double condition(const Conditioning& c, const std::string& source, Eigen::Vector
   // 40000 wrote a one-row dataset).
   if (const Eigen::Index kept = (n - 2 * drop + c.decimate - 1) / c.decimate; c.decimate > 1 && kept < 3)
     fail(source + ": --decimate " + std::to_string(c.decimate) + " keeps " + std::to_string(kept) + " row" + (kept == 1 ? "" : "s") + " of the " +
-         std::to_string(n - 2 * drop) + " left after --drop-edges; at most " + std::to_string((n - 2 * drop - 1) / 2) + " keeps 3");
+         std::to_string(n - 2 * drop) + (drop > 0 ? " left after --drop-edges" : " rows") + "; at most " + std::to_string((n - 2 * drop - 1) / 2) + " keeps 3");
   // Where a log ends while the robot moves, the low-pass starts with a transient that its
   // derivatives amplify: with 50 samples dropped after a 20 Hz pass at 1 kHz (307 to settle),
   // a review's log kept a 2.5 N m error in its last 0.1 s, and diagnose missed a 3 ms delay.
@@ -503,13 +525,13 @@ double condition(const Conditioning& c, const std::string& source, Eigen::Vector
   // of the log is said instead (the settling scales with the cut-off's period).
   if (transient > 0.01 && 2 * settle >= n)
     std::cerr << "spml: warning: " << source << ": --lowpass " << c.lowpass_hz << " Hz: its start-up transient (up to "
-              << std::lround(100 * transient) << " % of the RMS of " << transient_column << ") reaches " << settle << " samples ("
+              << percent_text(transient) << " % of the RMS of " << transient_column << ") reaches " << settle << " samples ("
               << static_cast<double>(settle) * dt << " s) into each end of a log of " << n
-              << " rows, so no drop leaves a row free of it; a cut-off of about " << c.lowpass_hz * static_cast<double>(settle) / (0.25 * static_cast<double>(n))
+              << " rows, so no drop leaves a row free of it; a cut-off of " << cutoff_settling_within(c.filter_order, c.lowpass_hz, 1 / dt, n / 4)
               << " Hz or more settles within a quarter of the log\n";
   else if (transient > 0.01)
     std::cerr << "spml: warning: " << source << ": --drop-edges " << drop << " keeps part of the low-pass's start-up transient (up to "
-              << std::lround(100 * transient) << " % of the RMS of " << transient_column << " in the rows kept), which reaches " << settle
+              << percent_text(transient) << " % of the RMS of " << transient_column << " in the rows kept), which reaches " << settle
               << " samples (" << static_cast<double>(settle) * dt << " s) into each end of the log: drop at least " << settle << "\n";
   // A band far below the sampling rate keeps all it holds at a fraction of the rows, and
   // diagnose's fits by simulation integrate every row thousands of times (a review's 31 s
@@ -590,6 +612,11 @@ Dataset table_to_dataset(const Table& table, const ImportSpec& spec) {
     const std::string where = table.source + ": split '" + r.name + "'";
     Eigen::Index b = parse_bound(r.begin, N, 0, where), e = parse_bound(r.end, N, N, where);
     if (e <= b) fail(where + ": empty row range [" + std::to_string(b) + ", " + std::to_string(e) + ")");
+    // The decimation's bound per split (a review's --decimate 14999 over a 64/36 split wrote a
+    // one-row test split): fewer than 3 rows hold no time step.
+    if (spec.conditioning.decimate > 1 && e - b < 3)
+      fail(where + ": --decimate " + std::to_string(spec.conditioning.decimate) + " leaves it " + std::to_string(e - b) + " row" +
+           (e - b == 1 ? "" : "s") + " (of " + std::to_string(N) + " kept); a split needs 3");
     // Overlapping splits would leak training rows into a test split.
     for (size_t k = 0; k < taken.size(); ++k)
       if (b < taken[k].second && taken[k].first < e)

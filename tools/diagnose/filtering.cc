@@ -71,15 +71,22 @@ FilterPlan plan_filter(const Dataset& ds, const std::vector<Eigen::VectorXd>& q,
       return plan;
     } else {
       notes.push_back("the dataset's filter attribute '" + it->second + "' is not understood: no parallel filtering");
+      plan.description = "the dataset's filter attribute is not understood: nothing filtered";
       return plan;
     }
   }
   plan.raw_differences = differences;
-  if (!(rate_hz > 0)) return plan;
+  // Why nothing is filtered, for report.json (a review read an empty `why`).
+  auto unfiltered = [&](const std::string& why) {
+    plan.description = "the dataset records no low-pass it can be filtered alike with, and " + why + ": nothing filtered";
+    return plan;
+  };
+  if (!(rate_hz > 0)) return unfiltered("its fit split has no uniform time stamps");
   const double band = excitation_band(q, rate_hz);
-  if (!(band > 0)) return plan;
+  if (!(band > 0)) return unfiltered("no band below a tenth of the rate holds the positions");
   const double cutoff = 5 * band;
-  if (!(cutoff < kWidestLowpassShare * rate_hz)) return plan;
+  if (!(cutoff < kWidestLowpassShare * rate_hz))
+    return unfiltered("five times the band the positions excite (" + text(cutoff) + " Hz) is not below 0.4 of the rate");
   // Two signs of noise above the band, either enough: the accelerations' own power there
   // (differences of noisy positions), or the model's error there - noise in the accelerations
   // that is small beside their signal can still be most of what the model as given misses
@@ -91,7 +98,10 @@ FilterPlan plan_filter(const Dataset& ds, const std::vector<Eigen::VectorXd>& q,
   for (const auto& e : residual) worst_residual = std::max(worst_residual, power_above(e, cutoff, rate_hz));
   const double white = 1 - cutoff / (0.5 * rate_hz);
   const double residual_bar = white + 0.5 * (1 - white);
-  if (worst_qdd <= 0.05 && worst_residual <= residual_bar) return plan;
+  if (worst_qdd <= 0.05 && worst_residual <= residual_bar)
+    return unfiltered("no noise lies above five times the band the positions excite (" + text(cutoff) + " Hz): the accelerations hold " +
+                      text(100 * worst_qdd) + " % of their power there (the bar: 5 %), the model's error " + text(100 * worst_residual) +
+                      " % on its worst joint (the bar: " + text(100 * residual_bar) + " %)");
   plan.source = FilterPlan::Source::detected;
   plan.raw_differences = true;
   plan.lowpass = {4, cutoff};
