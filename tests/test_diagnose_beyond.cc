@@ -556,7 +556,7 @@ TEST(DiagnoseBeyond, ALowPassAboveWhatTheDecimationKeptIsReadAsItsBand) {
   EXPECT_EQ(r["parallel_filter"]["source"], "detected") << r["parallel_filter"].dump();
   EXPECT_TRUE(r["parallel_filter"]["applied"].get<bool>()) << r["parallel_filter"].dump();
   bool said = false;
-  for (const auto& n : r["notes"]) said = said || n.get<std::string>().find("above the band its decimation kept (80 Hz at 200 Hz)") != std::string::npos;
+  for (const auto& n : r["notes"]) said = said || n.get<std::string>().find("above the band its decimation to 200 Hz kept (its anti-alias at 80 Hz)") != std::string::npos;
   EXPECT_TRUE(said) << r["notes"].dump();
 }
 

@@ -57,9 +57,13 @@ FilterPlan plan_filter(const Dataset& ds, const std::vector<Eigen::VectorXd>& q,
       // Hz): that low-pass can no longer be run at this rate, and reading it as the band left the
       // data unfiltered - LuGre named `coulomb` in a review. The band kept is the decimation's,
       // as if no low-pass were recorded: noise in it is looked for below.
-      notes.push_back("the dataset records a low-pass at " + text(rec->cutoff_hz) + " Hz ('" + it->second +
-                      "'), above the band its decimation kept (" + text(kept) + " Hz at " + text(rate_hz) +
-                      " Hz): the band is the decimation's, and noise in it is looked for as in a dataset that records no low-pass");
+      const auto dec = ds.provenance.find("decimation");
+      const auto d = dec == ds.provenance.end() ? std::nullopt : parse_decimation_record(dec->second);
+      const std::string kept_by = d && d->anti_alias ? "the band its decimation to " + text(rate_hz) + " Hz kept (its anti-alias at " +
+                                                           text(d->anti_alias->cutoff_hz) + " Hz)"
+                                                     : "what its plain decimation to " + text(rate_hz) + " Hz keeps unfolded (" + text(kept) + " Hz)";
+      notes.push_back("the dataset records a low-pass at " + text(rec->cutoff_hz) + " Hz ('" + it->second + "'), above " + kept_by +
+                      ": the band is the decimation's, and noise in it is looked for as in a dataset that records no low-pass");
     } else if (rec) {
       plan.source = FilterPlan::Source::recorded;
       plan.lowpass = *rec;
