@@ -709,7 +709,8 @@ const std::string kReviewArm = R"(<mujoco model="rev_arm">
   </worldbody>
 </mujoco>
 )";
-// Its logs imported as `spml generate` suggests: the 10 Hz low-pass, decimated to 200 Hz.
+// Its logs imported as `spml generate` suggested when they were made: the 10 Hz low-pass,
+// decimated to 200 Hz (it suggests 20 Hz since stop 50).
 const std::string kReviewArmImport =
     "--t t --x 'q:yaw,q:shoulder,q:elbow' --y 'tau:yaw,tau:shoulder,tau:elbow' --lowpass 10 --derive --drop-edges 612 --decimate 5";
 
