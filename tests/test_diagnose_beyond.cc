@@ -436,6 +436,13 @@ enum class BreakAway {
   said_free,               // fs reported not identifiable (the log holds no break-away)
 };
 
+// The cause of `effect` a report names and does not supersede (on `joint`, where given).
+const nlohmann::json* live_cause(const nlohmann::json& r, const std::string& effect, const std::string& joint = "") {
+  for (const auto& c : r["causes"])
+    if (c["effect"] == effect && !c.contains("superseded_by") && (joint.empty() || c["joints"][0] == joint)) return &c;
+  return nullptr;
+}
+
 // LuGre draw s of make_draw's family, its excitation's top frequency f_high (0: the default
 // band, 0.1-1 Hz): `stick_slip` named on its joint, fc within 20 %, fs as `fs` says. Returns
 // the report. `lowpass_hz`: the import's band.
@@ -458,35 +465,35 @@ nlohmann::json expect_stick_slip(const std::filesystem::path& dir, int s, double
   // on the joint must not end farther from the measured positions than the model as given's.
   EXPECT_LT(r["final"]["rel_error_test"][joint].get<double>(), 0.25 * r["baseline"]["rel_error_test"][joint].get<double>());
   for (const auto& w : r["rollout"]["worse_on"]) EXPECT_NE(w, joint) << "rollouts of extended.xml worse on the LuGre joint";
-  for (const auto& cause : r["causes"])
-    if (cause["effect"] == "stick_slip" && !cause.contains("superseded_by") && cause["joints"][0] == "j" + std::to_string(d.joint)) {
-      const auto& free = cause["not_identifiable"];
-      const bool said_free = std::find(free.begin(), free.end(), "fs") != free.end();
-      const double fs_error = std::fabs(cause["params"]["fs"].get<double>() - d.fs) / d.fs;
-      std::cout << "  " << cause["params"].dump() << "\n  not identifiable " << free.dump() << "\n";
-      EXPECT_NEAR(cause["params"]["fc"].get<double>(), d.fc, 0.2 * d.fc);
-      // Written with its amplitude refitted against the parameters extended.xml states
-      // (refit_written_effects): every magnitude by one factor, near 1 here, the Stribeck speed
-      // as fitted.
-      EXPECT_TRUE(cause.contains("params_written")) << cause.dump();
-      if (cause.contains("params_written")) {
-        const auto &p = cause["params"], &w = cause["params_written"];
-        const double a = w["fc"].get<double>() / p["fc"].get<double>();
-        EXPECT_NEAR(a, 1, 0.2);
-        for (const char* k : {"fs", "sigma0", "sigma1"}) EXPECT_NEAR(w[k].get<double>(), a * p[k].get<double>(), 1e-9 * a * p[k].get<double>()) << k;
-        EXPECT_EQ(w["vs"].get<double>(), p["vs"].get<double>());
-      }
-      if (fs == BreakAway::within_20_percent) {
-        EXPECT_LE(fs_error, 0.2);
-        EXPECT_FALSE(said_free) << free.dump();
-      }
-      if (fs == BreakAway::within_20_or_said_free) {
-        EXPECT_TRUE(fs_error <= 0.2 || said_free) << "fs off by " << fs_error;
-      }
-      if (fs == BreakAway::said_free) {
-        EXPECT_TRUE(said_free) << free.dump();
-      }
+  if (const nlohmann::json* named_here = live_cause(r, "stick_slip", joint)) {
+    const nlohmann::json& cause = *named_here;
+    const auto& free = cause["not_identifiable"];
+    const bool said_free = std::find(free.begin(), free.end(), "fs") != free.end();
+    const double fs_error = std::fabs(cause["params"]["fs"].get<double>() - d.fs) / d.fs;
+    std::cout << "  " << cause["params"].dump() << "\n  not identifiable " << free.dump() << "\n";
+    EXPECT_NEAR(cause["params"]["fc"].get<double>(), d.fc, 0.2 * d.fc);
+    // Written with its amplitude refitted against the parameters extended.xml states
+    // (refit_written_effects): every magnitude by one factor, near 1 here, the Stribeck speed
+    // as fitted.
+    EXPECT_TRUE(cause.contains("params_written")) << cause.dump();
+    if (cause.contains("params_written")) {
+      const auto &p = cause["params"], &w = cause["params_written"];
+      const double a = w["fc"].get<double>() / p["fc"].get<double>();
+      EXPECT_NEAR(a, 1, 0.2);
+      for (const char* k : {"fs", "sigma0", "sigma1"}) EXPECT_NEAR(w[k].get<double>(), a * p[k].get<double>(), 1e-9 * a * p[k].get<double>()) << k;
+      EXPECT_EQ(w["vs"].get<double>(), p["vs"].get<double>());
     }
+    if (fs == BreakAway::within_20_percent) {
+      EXPECT_LE(fs_error, 0.2);
+      EXPECT_FALSE(said_free) << free.dump();
+    }
+    if (fs == BreakAway::within_20_or_said_free) {
+      EXPECT_TRUE(fs_error <= 0.2 || said_free) << "fs off by " << fs_error;
+    }
+    if (fs == BreakAway::said_free) {
+      EXPECT_TRUE(said_free) << free.dump();
+    }
+  }
   return r;
 }
 
@@ -523,12 +530,6 @@ TEST(DiagnoseBeyond, ABreakAwayTheLowPassHidesIsNotStatedAsDetermined) {
 // fs 0.77 of the truth and vs 0.11 of it, both not identifiable, and the cause's `resolution`
 // says which Stribeck speeds the band resolves and which import resolves more; the same draw
 // through 40 Hz: fs within 20 % and determined, no such note.
-const nlohmann::json* live_cause(const nlohmann::json& r, const std::string& effect) {
-  for (const auto& c : r["causes"])
-    if (c["effect"] == effect && !c.contains("superseded_by")) return &c;
-  return nullptr;
-}
-
 TEST(DiagnoseBeyond, ABreakAwayTheBandSmearsSaysWhichBandResolvesIt) {
   SPML_SKIP_UNDER_SANITIZERS();
   const auto r10 = expect_stick_slip(test::temp_dir("lugre_band10"), 202, 0, BreakAway::said_free);
