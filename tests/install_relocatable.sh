@@ -16,15 +16,20 @@ for f in bin/spml include/spml/learner.h include/spml/force_plugin.h include/spm
   [ -e "$p/$f" ] || { echo "not installed: $f"; exit 1; }
 done
 listing=$(run "$p/bin/spml" learners; run "$p/bin/spml" plugins)
-echo "$listing" | grep -q "LLS" || { echo "no learners found:"; echo "$listing"; exit 1; }
-echo "$listing" | grep -q "friction_band" || { echo "no force plugins found:"; echo "$listing"; exit 1; }
+# Here-strings, not `echo | grep -q`: under pipefail grep's early exit at the first match can
+# kill echo's later writes with SIGPIPE, and the step fails now and then (3 of about 30 full
+# runs of the suite, 1.5 s in, where the listing is read).
+grep -q "LLS" <<<"$listing" || { echo "no learners found:"; echo "$listing"; exit 1; }
+grep -q "friction_band" <<<"$listing" || { echo "no force plugins found:"; echo "$listing"; exit 1; }
 if echo "$listing" | grep -e "$build_dir" -e "$source_dir"; then echo "paths into the build/source tree"; exit 1; fi
 # SimDyn-Ll needs the shipped MJCF and the friction_band plugin; bench needs the learners
 # and, through compare, the paper's tables.
 run "$p/bin/spml" generate --scenario simdyn-ll --test-stride 50 --out "$work/arm.h5" --quiet >/dev/null
 run "$p/bin/spml" generate --scenario toy --out "$work/toy.h5" --quiet >/dev/null
 run "$p/bin/spml" bench --data "$work/toy.h5" --out "$work/bench" --learners LLS,GP --reps 1 2>/dev/null >/dev/null
-run "$p/bin/spml" compare --results "$work/bench/results.csv" | grep -q "toy_interp_w_noise.csv"
+# (Captured first, for the same reason.)
+compared=$(run "$p/bin/spml" compare --results "$work/bench/results.csv")
+grep -q "toy_interp_w_noise.csv" <<<"$compared" || { echo "compare does not list toy_interp_w_noise.csv:"; echo "$compared"; exit 1; }
 # No RUNPATH and no string constant (.rodata) of an installed binary names the build or
 # source tree (debug information may, and is not looked at).
 for f in "$p/bin/spml" $(find "$p/lib" -name '*.so'); do

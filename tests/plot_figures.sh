@@ -41,5 +41,5 @@ grep -q "table_toy_test_interp_0.png" "$tmp/list1" || { echo "schema-1 results n
 # Bad input is named.
 echo "not,a,results,file" > "$tmp/bad.csv"
 if out=$("$spml" plot --results "$tmp/bad.csv" --out "$tmp/fig2" 2>&1); then echo "accepted a bad results.csv"; exit 1; fi
-echo "$out" | grep -q "bad.csv" || { echo "error does not name the file: $out"; exit 1; }
+grep -q "bad.csv" <<<"$out" || { echo "error does not name the file: $out"; exit 1; }
 echo "all figures drawn"
