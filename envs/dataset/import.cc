@@ -523,16 +523,18 @@ double condition(const Conditioning& c, const std::string& source, Eigen::Vector
   // Where the transient reaches past the log's middle no drop helps (a review's --lowpass 1e-3
   // was told to drop more samples than the log had): the cut-off that settles within a quarter
   // of the log is said instead (the settling scales with the cut-off's period).
-  if (transient > 0.01 && 2 * settle >= n)
-    std::cerr << "spml: warning: " << source << ": --lowpass " << c.lowpass_hz << " Hz: its start-up transient (up to "
-              << percent_text(transient) << " % of the RMS of " << transient_column << ") reaches " << settle << " samples ("
-              << static_cast<double>(settle) * dt << " s) into each end of a log of " << n
-              << " rows, so no drop leaves a row free of it; a cut-off of " << cutoff_settling_within(c.filter_order, c.lowpass_hz, 1 / dt, n / 4)
-              << " Hz or more settles within a quarter of the log\n";
-  else if (transient > 0.01)
-    std::cerr << "spml: warning: " << source << ": --drop-edges " << drop << " keeps part of the low-pass's start-up transient (up to "
-              << percent_text(transient) << " % of the RMS of " << transient_column << " in the rows kept), which reaches " << settle
-              << " samples (" << static_cast<double>(settle) * dt << " s) into each end of the log: drop at least " << settle << "\n";
+  if (transient > 0.01) {
+    std::cerr << "spml: warning: " << source << ": ";
+    if (2 * settle >= n)
+      std::cerr << "--lowpass " << c.lowpass_hz << " Hz: its start-up transient (up to " << percent_text(transient) << " % of the RMS of "
+                << transient_column << ") reaches " << settle << " samples (" << static_cast<double>(settle) * dt
+                << " s) into each end of a log of " << n << " rows, so no drop leaves a row free of it; a cut-off of "
+                << cutoff_settling_within(c.filter_order, c.lowpass_hz, 1 / dt, n / 4) << " Hz or more settles within a quarter of the log\n";
+    else
+      std::cerr << "--drop-edges " << drop << " keeps part of the low-pass's start-up transient (up to " << percent_text(transient)
+                << " % of the RMS of " << transient_column << " in the rows kept), which reaches " << settle << " samples ("
+                << static_cast<double>(settle) * dt << " s) into each end of the log: drop at least " << settle << "\n";
+  }
   // A band far below the sampling rate keeps all it holds at a fraction of the rows, and
   // diagnose's fits by simulation integrate every row thousands of times (a review's 31 s
   // LuGre log with 3 joints kept at 1 kHz: 54 s, decimated to 200 Hz 12 s, the same causes).

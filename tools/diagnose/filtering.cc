@@ -3,6 +3,7 @@
 #include "filtering.h"
 
 #include <cmath>
+#include <optional>
 #include <sstream>
 
 namespace spml::diagnose_detail {
@@ -36,9 +37,18 @@ double excitation_band(const std::vector<Eigen::VectorXd>& q, double rate) {
 
 }  // namespace
 
-double decimated_by(const Dataset& ds) {
+namespace {
+
+// The dataset's decimation record (nullopt: none, or not understood).
+std::optional<DecimationRecord> decimation_of(const Dataset& ds) {
   const auto it = ds.provenance.find("decimation");
-  const auto d = it == ds.provenance.end() ? std::nullopt : parse_decimation_record(it->second);
+  return it == ds.provenance.end() ? std::nullopt : parse_decimation_record(it->second);
+}
+
+}  // namespace
+
+double decimated_by(const Dataset& ds) {
+  const auto d = decimation_of(ds);
   return d ? d->keep : 1;
 }
 
@@ -50,15 +60,14 @@ FilterPlan plan_filter(const Dataset& ds, const std::vector<Eigen::VectorXd>& q,
   const auto it = ds.provenance.find("filter");
   if (it != ds.provenance.end()) {
     const auto rec = parse_lowpass_record(it->second);
-    const double kept = kWidestLowpassShare * rate_hz;
-    if (rec && decimated_by(ds) > 1 && rate_hz > 0 && rec->cutoff_hz >= kept) {
+    const auto d = decimation_of(ds);
+    const double keep = d ? d->keep : 1, kept = kWidestLowpassShare * rate_hz;
+    if (rec && keep > 1 && rate_hz > 0 && rec->cutoff_hz >= kept) {
       // The decimation's anti-alias kept less than the recorded low-pass passes (--lowpass 150
       // --decimate 5 at 1 kHz keeps 80 Hz; EMPS's published 100 Hz before decimating by 10, 40
       // Hz): that low-pass can no longer be run at this rate, and reading it as the band left the
       // data unfiltered - LuGre named `coulomb` in a review. The band kept is the decimation's,
       // as if no low-pass were recorded: noise in it is looked for below.
-      const auto dec = ds.provenance.find("decimation");
-      const auto d = dec == ds.provenance.end() ? std::nullopt : parse_decimation_record(dec->second);
       const std::string kept_by = d && d->anti_alias ? "the band its decimation to " + text(rate_hz) + " Hz kept (its anti-alias at " +
                                                            text(d->anti_alias->cutoff_hz) + " Hz)"
                                                      : "what its plain decimation to " + text(rate_hz) + " Hz keeps unfolded (" + text(kept) + " Hz)";
@@ -69,7 +78,7 @@ FilterPlan plan_filter(const Dataset& ds, const std::vector<Eigen::VectorXd>& q,
       plan.lowpass = *rec;
       // A low-pass at or above 0.4 of the rate it ran at (before a decimation) smoothed next to
       // nothing (--lowpass 450 at 1 kHz, decimated 6: a delay of +2.9 ms named on clean data).
-      plan.raw_differences = differences && rate_hz > 0 && rec->cutoff_hz >= kWidestLowpassShare * rate_hz * decimated_by(ds);
+      plan.raw_differences = differences && rate_hz > 0 && rec->cutoff_hz >= kWidestLowpassShare * rate_hz * keep;
       plan.description = "the dataset records the low-pass it went through ('" + it->second +
                          "'): every model and candidate column is filtered alike (parallel filtering); the torques already were";
       return plan;
