@@ -210,15 +210,18 @@ TEST(Hardening, ADeclaredForceOrdersOfMagnitudeOffIsRefused) {
   }
 }
 
+// A log of one joint that ends moving: 3000 rows at 1 kHz, q = sin(w t), tau = cos(w t).
+void write_sine_log(const std::string& name, double w) {
+  std::ofstream log(f(name));
+  log << "t,q:j,tau:j\n";
+  for (int i = 0; i < 3000; ++i) log << i * 1e-3 << "," << std::sin(w * i * 1e-3) << "," << std::cos(w * i * 1e-3) << "\n";
+}
+
 // Too few samples dropped after a low-pass, from a log that ends moving: the import says how
 // far the start-up transient reaches (20 Hz, order 4, at 1 kHz: 307 samples); enough dropped,
 // nothing is said.
 TEST(Hardening, ImportSaysHowManyEdgeSamplesTheFiltersSpoil) {
-  {
-    std::ofstream log(f("moving.csv"));
-    log << "t,q:j,tau:j\n";
-    for (int i = 0; i < 3000; ++i) log << i * 1e-3 << "," << std::sin(8.0 * i * 1e-3) << "," << std::cos(8.0 * i * 1e-3) << "\n";
-  }
+  write_sine_log("moving.csv", 8.0);
   const std::string import = spml("import " + f("moving.csv") + " --t t --x q:j --y tau:j --lowpass 20 --derive -o " + f("moving.h5") + " --drop-edges ");
   const auto few = run(import + "50");
   EXPECT_EQ(few.exit_code, 0) << few.output;
@@ -232,11 +235,7 @@ TEST(Hardening, ImportSaysHowManyEdgeSamplesTheFiltersSpoil) {
 // A low-passed log kept far above its band: the import says which decimation keeps the band
 // (diagnose's fits by simulation cost in proportion to the rows); decimated, nothing is said.
 TEST(Hardening, ImportSuggestsTheDecimationThatKeepsTheBand) {
-  {
-    std::ofstream log(f("fast.csv"));
-    log << "t,q:j,tau:j\n";
-    for (int i = 0; i < 3000; ++i) log << i * 1e-3 << "," << std::sin(2.0 * i * 1e-3) << "," << std::cos(2.0 * i * 1e-3) << "\n";
-  }
+  write_sine_log("fast.csv", 2.0);
   const std::string import = spml("import " + f("fast.csv") + " --t t --x q:j --y tau:j --lowpass 20 --derive --drop-edges 307 -o " + f("fast.h5"));
   const auto kept = run(import);
   EXPECT_EQ(kept.exit_code, 0) << kept.output;
@@ -250,11 +249,7 @@ TEST(Hardening, ImportSuggestsTheDecimationThatKeepsTheBand) {
 // (a review's --decimate 40000 wrote a one-row dataset); a cut-off too low for the log is said
 // (its --lowpass 1e-3 was told to drop more samples than the log had): 3000 rows at 1 kHz.
 TEST(Hardening, ImportSaysWhatLeavesNoUsableRow) {
-  {
-    std::ofstream log(f("short.csv"));
-    log << "t,q:j,tau:j\n";
-    for (int i = 0; i < 3000; ++i) log << i * 1e-3 << "," << std::sin(2.0 * i * 1e-3) << "," << std::cos(2.0 * i * 1e-3) << "\n";
-  }
+  write_sine_log("short.csv", 2.0);
   const std::string import = spml("import " + f("short.csv") + " --t t --x q:j --y tau:j --derive -o " + f("short.h5"));
   const auto one_row = run(import + " --decimate 40000");
   EXPECT_NE(one_row.exit_code, 0) << one_row.output;
