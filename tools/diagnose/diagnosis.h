@@ -109,7 +109,7 @@ struct Candidate {
   bool break_away_loose = false;              // joins only by rolling out closer (rolls_out_better): a small loose gap of a level (profile_once), a key at an end (settle_levels)
   std::string at_range_end;                   // settle_levels: the keys at an end of their range or at the plugin's edge
   std::string lost_to_static;                 // the last held-out comparison it lost to the static frictions (note_lost), for not_tried
-  std::string resolution;                     // profile_once: the Stribeck hump's loose keys, the speeds the parallel filter resolves, and a band that resolves more
+  std::string resolution;                     // profile_once: the Stribeck hump's loose keys, the speeds the parallel filter resolves, and a band that resolves more; keys of a transient shorter than it resolves
 
   // Is key (of shape key k) in not_identifiable; put it there once.
   bool loose(const std::string& key) const { return std::find(not_identifiable.begin(), not_identifiable.end(), key) != not_identifiable.end(); }
@@ -386,7 +386,7 @@ class Diagnosis {
   nlohmann::json delay_cause() const;
   // stateful_fit.cc (#22)
   void add_stateful_candidates(const spml_force_plugin& p);
-  BlockColumns simulated_columns(const PluginInstance& inst, const SplitData& s) const;
+  BlockColumns simulated_columns(const PluginInstance& inst, const SplitData& s, bool filtered = true) const;
   double stateful_drop(const Candidate& c, const Fit& current, const std::vector<double>& x, Eigen::VectorXd* force = nullptr) const;
   std::vector<double> drops_at(const Candidate& c, const Fit& current, const std::vector<std::vector<double>>& points) const;
   void fit_stateful(Candidate& c, const Fit& current);
@@ -408,6 +408,7 @@ class Diagnosis {
   bool gap_loose(const Candidate& c, size_t k, size_t principal) const;
   double reversal_crossing(int joint, double v) const;
   bool unresolved_speed(int joint, double v) const;
+  double key_transient(const Candidate& c, size_t k) const;
   std::string resolution_note(int joint, const std::string& keys) const;
   bool shaped(const Candidate& c) const;
   bool beats_static(const Candidate& c, double bar, double rss) const;
