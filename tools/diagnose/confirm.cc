@@ -8,8 +8,8 @@
 // which its own joint's rollouts need, stays; one whose own joint rolls out worse with it and
 // better without it goes whatever it does for the others (an end stop read as an armature
 // rolled its own joint 7 % worse and was kept for a coupled joint's 13 %: a compensation, not
-// a cause; no hidden LuGre, Coulomb or delay of the seed tables, about 200 draws, rolled out
-// worse on its own joint). (Only "worse beyond noise", a paired mean beyond
+// a cause; no hidden LuGre, Coulomb, delay or damping error of the seed tables, about 230
+// draws, rolled out worse on its own joint). (Only "worse beyond noise", a paired mean beyond
 // two standard errors, started the trials before: an end stop read as re-identified link
 // masses and a spring rolled out 1.6 and 1.5 times worse on two joints of a review's draw,
 // within the 20 windows' noise, and was kept; on a fresh log of that robot it was 3 times

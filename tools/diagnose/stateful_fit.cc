@@ -810,22 +810,17 @@ void Diagnosis::profile_once(int k, const Fit& current) {
   // determined (one sigma0 right to 1 %); sigma0's transient was 5.0-9.7 ms wide on 6 of them,
   // 12.0 ms on one (sigma0 0.47 times, which two rows miss). The seed table's own bristles:
   // 16.7-53 ms (8 draws), sigma0 within 11 % on all 30 draws and never marked.
-  std::string brief;
+  auto bristle = [&](size_t k2) { return !level[k2] && c.shape[k2]->domain == SPML_SHAPE_ABSOLUTE; };
   double shortest = HUGE_VAL;
-  for (size_t k2 = 0; k2 < c.shape.size(); ++k2) {
-    if (level[k2] || c.shape[k2]->domain != SPML_SHAPE_ABSOLUTE) continue;
-    const double lasting = key_transient(c, k2);
-    if (!(lasting > 0)) continue;
-    shortest = std::min(shortest, lasting);
-    brief += std::string(brief.empty() ? "" : ", ") + c.shape[k2]->key;
-  }
+  for (size_t k2 = 0; k2 < c.shape.size(); ++k2)
+    if (const double lasting = bristle(k2) ? key_transient(c, k2) : 0; lasting > 0) shortest = std::min(shortest, lasting);
   const double rows = fit_.split.t.size() >= 2 ? 2 * median_step(fit_.split.t) : 0;
-  if (shortest < rows) {
-    for (size_t k2 = 0; k2 < c.shape.size(); ++k2)
-      if (!level[k2] && c.shape[k2]->domain == SPML_SHAPE_ABSOLUTE) c.mark_loose(c.shape[k2]->key);
-  } else {
-    brief.clear();
-  }
+  std::string brief;   // the keys of a transient shorter than two rows
+  for (size_t k2 = 0; k2 < c.shape.size() && shortest < rows; ++k2)
+    if (bristle(k2)) {
+      c.mark_loose(c.shape[k2]->key);
+      brief += std::string(brief.empty() ? "" : ", ") + c.shape[k2]->key;
+    }
   std::string hump;   // the loose keys of the hump: its speed and the levels above the principal one
   for (size_t k2 = 0; k2 < c.shape.size(); ++k2)
     if (c.loose(k2) && (level[k2] ? static_cast<int>(k2) != principal && c.shape_values[k2] > 0 : c.shape[k2]->domain == SPML_SHAPE_SPEED))
