@@ -103,6 +103,7 @@ struct Candidate {
   Eigen::MatrixXd stateful_cov;               // per pair of shape keys, absolute (stateful_errors); infinite on a key that does not move the force
   std::vector<std::string> not_identifiable;  // keys with a relative standard error above 50 %, or that far apart between equally good fits
   bool profiled = false;                      // profile_once ran
+  bool transients_checked = false;            // mark_short_transients ran
   double written_scale = 1;                   // the written model's factor on its levels (refit_written_effects)
   std::vector<bool> at_edge;                  // per shape key: a side of it the plugin refuses at the fit (stateful_errors)
   std::string refusal;                        // profile_once: why the profile says it is not this effect (empty: it may be)
@@ -409,6 +410,7 @@ class Diagnosis {
   double reversal_crossing(int joint, double v) const;
   bool unresolved_speed(int joint, double v) const;
   double key_transient(const Candidate& c, size_t k) const;
+  void mark_short_transients(Candidate& c);
   std::string resolution_note(int joint, const std::string& keys) const;
   bool shaped(const Candidate& c) const;
   bool beats_static(const Candidate& c, double bar, double rss) const;

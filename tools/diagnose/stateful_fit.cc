@@ -718,6 +718,39 @@ double Diagnosis::key_transient(const Candidate& c, size_t k) const {
   return width.empty() ? 0 : quantile(std::move(width), 0.5);
 }
 
+// Keys that shape only a transient after each reversal (LuGre's bristles: sigma0 sets the
+// pre-sliding the joint travels before it slides, sigma1 damps it there) are judged together
+// by the shortest: lasting under two of the log's rows, the data hold no such transient, and
+// every one of them is not identifiable, with a note in `resolution`. Once per candidate, for
+// every one compared with the static frictions (stateful_joins), whether it joins or not (the
+// fifteenth review's not_tried LuGre fits gave sigma0 0.57 times the truth as determined). With
+// bristles 100 times stiffer than the seed table's (pre-sliding of 10-30 urad, one or two
+// encoder counts; 30 s, 20 Hz import, 200 Hz rows), 7 LuGre draws stated sigma0 0.47-2.5
+// times the truth and sigma1 1.4-11 times as determined (one sigma0 right to 1 %); sigma0's
+// transient was 5.0-9.7 ms wide on 6 of them, 12.0 ms on one (sigma0 0.47 times, which two
+// rows miss). The seed table's own bristles: 16.7-53 ms (8 draws), sigma0 within 11 % on all
+// 30 draws and never marked.
+void Diagnosis::mark_short_transients(Candidate& c) {
+  if (c.transients_checked) return;
+  c.transients_checked = true;
+  const std::vector<bool> level = stateful_space(c).level;
+  auto bristle = [&](size_t k) { return !level[k] && c.shape[k]->domain == SPML_SHAPE_ABSOLUTE; };
+  double shortest = HUGE_VAL;
+  for (size_t k = 0; k < c.shape.size(); ++k)
+    if (const double lasting = bristle(k) ? key_transient(c, k) : 0; lasting > 0) shortest = std::min(shortest, lasting);
+  const double rows = fit_.split.t.size() >= 2 ? 2 * median_step(fit_.split.t) : 0;
+  if (!(shortest < rows)) return;
+  std::string keys;
+  for (size_t k = 0; k < c.shape.size(); ++k)
+    if (bristle(k)) {
+      c.mark_loose(c.shape[k]->key);
+      keys += std::string(keys.empty() ? "" : ", ") + c.shape[k]->key;
+    }
+  c.resolution += std::string(c.resolution.empty() ? "" : "; ") + keys + " not identifiable: the transient they shape after a reversal lasts " +
+                  fmt(1e3 * shortest, 2) + " ms (median width), under two rows of this log (" + fmt(1e3 * rows, 3) +
+                  " ms): the data hold no pre-sliding to fit them to";
+}
+
 // Why a break-away may be loose, and what would tell it: through a low-pass of cut-off f the
 // torques resolve a Stribeck hump the joint crosses at its reversals in a quarter period of f
 // or more (kResolvedCrossing), a speed of at least kResolvedCrossing / f / (2 / median |q̈|).
@@ -801,35 +834,12 @@ void Diagnosis::profile_once(int k, const Fit& current) {
   if (speed_loose)
     for (size_t k2 = 0; k2 < level.size(); ++k2)
       if (level[k2] && c.shape_values[k2] > 0 && static_cast<int>(k2) != principal) c.mark_loose(c.shape[k2]->key);
-  // Keys that shape only a transient after each reversal (LuGre's bristles: sigma0 sets the
-  // pre-sliding the joint travels before it slides, sigma1 damps it there) are judged together
-  // by the shortest: lasting under two of the log's rows, the data hold no such transient, and
-  // every one of them is not identifiable. With bristles 100 times stiffer than the seed
-  // table's (pre-sliding of 10-30 urad, one or two encoder counts; 30 s, 20 Hz import, 200 Hz
-  // rows), 7 LuGre draws stated sigma0 0.47-2.5 times the truth and sigma1 1.4-11 times as
-  // determined (one sigma0 right to 1 %); sigma0's transient was 5.0-9.7 ms wide on 6 of them,
-  // 12.0 ms on one (sigma0 0.47 times, which two rows miss). The seed table's own bristles:
-  // 16.7-53 ms (8 draws), sigma0 within 11 % on all 30 draws and never marked.
-  auto bristle = [&](size_t k2) { return !level[k2] && c.shape[k2]->domain == SPML_SHAPE_ABSOLUTE; };
-  double shortest = HUGE_VAL;
-  for (size_t k2 = 0; k2 < c.shape.size(); ++k2)
-    if (const double lasting = bristle(k2) ? key_transient(c, k2) : 0; lasting > 0) shortest = std::min(shortest, lasting);
-  const double rows = fit_.split.t.size() >= 2 ? 2 * median_step(fit_.split.t) : 0;
-  std::string brief;   // the keys of a transient shorter than two rows
-  for (size_t k2 = 0; k2 < c.shape.size() && shortest < rows; ++k2)
-    if (bristle(k2)) {
-      c.mark_loose(c.shape[k2]->key);
-      brief += std::string(brief.empty() ? "" : ", ") + c.shape[k2]->key;
-    }
   std::string hump;   // the loose keys of the hump: its speed and the levels above the principal one
   for (size_t k2 = 0; k2 < c.shape.size(); ++k2)
     if (c.loose(k2) && (level[k2] ? static_cast<int>(k2) != principal && c.shape_values[k2] > 0 : c.shape[k2]->domain == SPML_SHAPE_SPEED))
       hump += std::string(hump.empty() ? "" : ", ") + c.shape[k2]->key;
-  if (!hump.empty()) c.resolution = resolution_note(c.joint, hump);
-  if (!brief.empty())
-    c.resolution += std::string(c.resolution.empty() ? "" : "; ") + brief + " not identifiable: the transient they shape after a reversal lasts " +
-                    fmt(1e3 * shortest, 2) + " ms (median width), under two rows of this log (" + fmt(1e3 * rows, 3) +
-                    " ms): the data hold no pre-sliding to fit them to";
+  if (!hump.empty()) c.resolution = resolution_note(c.joint, hump) + (c.resolution.empty() ? "" : "; " + c.resolution);
+  mark_short_transients(c);
   if (!speed_loose && !any_loose_level) return;
   // The principal level must be determined by the profile too. settle_levels refuses a loose
   // level by its local standard error, before the profile runs; left loose here, a hidden
@@ -971,6 +981,7 @@ int Diagnosis::stateful_rival(int accepted, const std::vector<int>& order, const
 bool Diagnosis::stateful_joins(int k, const Fit& current, const std::vector<int>& chosen, double bar, double rss, const std::vector<int>& rivals,
                                const std::vector<int>& beside) {
   Candidate& c = cands_[static_cast<size_t>(k)];
+  mark_short_transients(c);
   auto beaten = [&] {
     if (!std::isfinite(bar) || beats_static(c, bar, rss)) return false;
     note_lost(k, bar, rss, stateful_gain(c));
