@@ -42,6 +42,23 @@ nlohmann::json per_joint_errors(const RolloutResult& r) {
   return j;
 }
 
+}  // namespace
+
+// Over its own joints together: a `parameters` cause listing three joints, worse on one by
+// 25 % and better on the two others by half, is needed by its joints (a review's end stop;
+// judged on the worse one alone, it was rejected).
+bool better_without_cause(const RolloutResult& before, const RolloutResult& with, const RolloutResult& without,
+                          const std::vector<bool>& worse, const std::vector<bool>& own, bool* own_rule) {
+  bool own_worse = false;
+  for (size_t j = 0; j < worse.size() && j < own.size(); ++j) own_worse = own_worse || (worse[j] && own[j]);
+  const bool own_better = own_worse && relative_total(before, without, &own) < relative_total(before, with, &own);
+  if (own_rule) *own_rule = own_better;
+  return relative_total(before, without, &worse) < relative_total(before, with, &worse) &&
+         (own_better || relative_total(before, without) < relative_total(before, with));
+}
+
+namespace {
+
 // The edits without one cause's part: an effect's declaration, or every parameter edit.
 MjcfEdits without_cause(const MjcfEdits& edits, const nlohmann::json& cause) {
   MjcfEdits out = edits;
@@ -109,19 +126,13 @@ bool Diagnosis::confirm_in_simulation(const std::string& ext_path, MjcfEdits& ed
     const RolloutResult before = rollout(opt_.model, test_.split, opt_.rollouts, opt_.rollout_seconds, test_.runs);
     RolloutResult with = rollout(ext_path, test_.split, opt_.rollouts, opt_.rollout_seconds, test_.runs);
     std::vector<bool> worse;
-    // Writes `trial`; keeps it when its rollouts do better on the worse joints and over all,
-    // or, where one of `own` (the joints of the cause it leaves out) is worse, over those own
-    // joints together (a `parameters` cause listing three joints, worse on one by 25 % and
-    // better on the two others by half, is needed by its joints: a review's end stop).
+    // Writes `trial` (the edits without a cause whose joints are `own`); keeps it when its
+    // rollouts do better (better_without_cause).
     auto better_without = [&](const MjcfEdits& trial, nlohmann::json& record, const std::vector<bool>& own) {
       write(trial);
       RolloutResult without = rollout(ext_path, test_.split, opt_.rollouts, opt_.rollout_seconds, test_.runs);
-      bool own_worse = false;
-      for (size_t j = 0; j < worse.size(); ++j) own_worse = own_worse || (worse[j] && own[j]);
-      const bool own_better = own_worse && relative_total(before, without, &own) < relative_total(before, with, &own);
-      if (!(relative_total(before, without, &worse) < relative_total(before, with, &worse) &&
-            (own_better || relative_total(before, without) < relative_total(before, with))))
-        return false;
+      bool own_better = false;
+      if (!better_without_cause(before, with, without, worse, own, &own_better)) return false;
       record = {{"reason", own_better ? "its written form makes the rollouts of its own joints worse, and without it they roll out better: "
                                         "what it gives other joints is a compensation, not a cause; extended.xml leaves it out"
                                       : "its written form makes the rollouts worse on its joints, and the model without it rolls out better; extended.xml leaves it out"},

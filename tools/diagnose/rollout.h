@@ -44,6 +44,14 @@ std::vector<RolloutTrace> rollout_traces(const std::string& mjcf_path, const Spl
 // confirmation in simulation tries to mend (confirm.cc).
 std::vector<bool> worse_joints(const RolloutResult& before, const RolloutResult& after);
 
+// The confirmation's verdict on one cause (confirm.cc): does the model `without` it roll out
+// better than the model `with` it? Yes when it does on the `worse` joints and over all joints
+// (each relative to `before`, the model as given), or, where one of `own` (the cause's joints)
+// is among the worse, on the worse joints and over its own joints together. *own_rule says
+// whether the second clause decided.
+bool better_without_cause(const RolloutResult& before, const RolloutResult& with, const RolloutResult& without,
+                          const std::vector<bool>& worse, const std::vector<bool>& own, bool* own_rule = nullptr);
+
 // Up to three windows worth drawing: the one with the largest end error (each joint's error
 // relative to its mean over the windows: joints differ in units), the median one and the smallest.
 std::vector<int> windows_to_trace(const RolloutResult& r);
