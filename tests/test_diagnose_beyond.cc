@@ -65,6 +65,9 @@ struct Measurement {
   // this much more torque along the motion it made (inverse dynamics is additive).
   int extra_joint = -1;
   std::function<double(double q, double qd)> extra;
+  // A torque on the same joint that follows time, not the state (a load or a temperature the
+  // log does not hold).
+  std::function<double(double t)> drift;
 };
 
 std::string measured(const Case& c, const std::string& path, unsigned seed, const Measurement& m) {
@@ -80,6 +83,8 @@ std::string measured(const Case& c, const std::string& path, unsigned seed, cons
   if (m.extra && m.extra_joint >= 0)
     for (Eigen::Index i = 0; i < run.tau.rows(); ++i)   // no jitter: sample i is tick i
       run.tau(i, m.extra_joint) += m.extra(run.tick_qpos(i, m.extra_joint), run.tick_qvel(i, m.extra_joint));
+  if (m.drift && m.extra_joint >= 0)
+    for (Eigen::Index i = 0; i < run.tau.rows(); ++i) run.tau(i, m.extra_joint) += m.drift(static_cast<double>(i) / o.rate);
   if (m.delay_samples > 0) {
     const Eigen::MatrixXd tau = run.tau;
     for (Eigen::Index i = 0; i < tau.rows(); ++i) run.tau.row(i) = tau.row(std::max<Eigen::Index>(0, i - m.delay_samples));
@@ -306,6 +311,12 @@ Draw make_draw(const std::filesystem::path& dir, const std::string& kind, int s,
       d.what += " lim=" + test::num(lim) + " k=" + test::num(k);
     }
     m.extra_joint = d.joint;
+  }
+  if (kind == "drift") {   // a slow sine in time, a fifth of the joint's RMS torque
+    const double a = 0.2 * std::sqrt(2.0) * rms, period = 0.45 * m.duration;
+    m.drift = [a, period](double t) { return a * std::sin(2 * M_PI * t / period); };
+    m.extra_joint = d.joint;
+    d.what += " a=" + test::num(a);
   }
   if (!decl.empty()) {
     d.c = make_case(dir, tag, seed, decl, d.joint);
@@ -996,6 +1007,25 @@ TEST(DiagnoseBeyond, CleanJointsHaveNoUnexplainedStructure) {
     const auto r = run_draw(dir, d, s);
     std::cout << "clean draw " << s << " at " << 100 * noise << " % noise: unexplained " << r["unexplained"].dump() << "\n";
     EXPECT_TRUE(r["unexplained"].empty()) << r["unexplained"].dump();
+    EXPECT_TRUE(r["left_unexplained"].empty()) << r["left_unexplained"].dump();
+  }
+}
+
+// A torque that follows time, not the state (a slow sine of a fifth of the joint's RMS torque:
+// a load or a temperature the log does not hold) left 14-34 % of the joint's held-out torque
+// on 8 seed-table draws with nothing named and, on 7, no `unexplained` entry either (the GP
+// over the states cannot predict the later test split) - as a fifteenth review's rigid joint
+// limit left 26.6 %. Such a joint is listed in `left_unexplained`, and only it.
+TEST(DiagnoseBeyond, ATorqueTheStatesDoNotPredictIsLeftUnexplained) {
+  const auto dir = test::temp_dir("drift");
+  for (const int s : {200, 204}) {
+    const Draw d = make_draw(dir, "drift", s, 0, Measurement{});
+    const auto r = run_draw(dir, d, s);
+    const std::string joint = "j" + std::to_string(d.joint);
+    std::cout << d.what << " on " << joint << ": named " << joined(named(r)) << "; left_unexplained " << r["left_unexplained"].dump() << "\n";
+    ASSERT_EQ(r["left_unexplained"].size(), 1u) << r["left_unexplained"].dump();
+    EXPECT_EQ(r["left_unexplained"][0]["joint"], joint);
+    EXPECT_NEAR(r["left_unexplained"][0]["rel_error_test"].get<double>(), r["final"]["rel_error_test"][joint].get<double>(), 1e-12);
   }
 }
 
@@ -1147,6 +1177,7 @@ TEST(DiagnoseBeyond, DISABLED_SeedTable) {
     for (const auto& t : r["not_tried"])
       if (t.value("joint", "") == "j" + std::to_string(d.joint) && t.value("effect", "") == "stick_slip")
         std::cout << "   not tried " << t["reason"] << (t.contains("resolution") ? "\n     resolution: " + t["resolution"].get<std::string>() : "") << "\n";
+    if (!r["left_unexplained"].empty()) std::cout << "   left_unexplained " << r["left_unexplained"].dump() << "\n";
     std::cout << "   rollout worse_on " << r["rollout"]["worse_on"].dump() << "; held-out relative error on j" << d.joint << " "
               << r["baseline"]["rel_error_test"]["j" + std::to_string(d.joint)] << " as given, " << r["final"]["rel_error_test"]["j" + std::to_string(d.joint)] << " written\n";
     double held = 0, roll = 0;   // geometric means over the joints of written / as given

@@ -108,6 +108,9 @@ std::string report_summary(const nlohmann::json& r) {
     if (u.contains("share"))
       s << "  unexplained on " << u["joint"].get<std::string>() << ": a GP on the residual explains " << pct(u["share"].get<double>())
         << " of it held out, mostly through " << u["inputs"][0].get<std::string>() << "\n";
+  for (const auto& l : r.value("left_unexplained", nlohmann::json::array()))   // #22
+    s << "  left on " << l["joint"].get<std::string>() << ": " << pct(l["rel_error_test"].get<double>())
+      << " of its held-out torque, which neither a cause nor a GP over the logged states explains\n";
   return s.str();
 }
 
@@ -189,6 +192,13 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
     for (const auto& n : r["not_tried"])
       s << "- " << n["effect"].get<std::string>() << (n.contains("joint") ? " on " + n["joint"].get<std::string>() : "") << ": "
         << n["reason"].get<std::string>() << "\n";
+  }
+  if (const auto left = r.value("left_unexplained", nlohmann::json::array()); !left.empty()) {   // #22
+    s << "\n## Left unexplained\n\n";
+    for (const auto& l : left)
+      s << "- " << l["joint"].get<std::string>() << ": the written model leaves " << pct(l["rel_error_test"].get<double>())
+        << " of its held-out torque, and neither a cause nor a GP over the logged states explains it: what is missing does not follow "
+           "from the states (a stop or contact that holds the joint, a load, command or temperature the log does not hold), or the torque is mostly noise\n";
   }
   if (!r["notes"].empty()) {
     s << "\n## Notes\n\n";

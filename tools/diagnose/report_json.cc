@@ -299,6 +299,7 @@ void Diagnosis::build_report(const std::string& out_dir) {
   // and the held-out guard. On the fit's own residual, a review's end stop whose causes were all
   // rejected had its unexplained rmse_test read 0.725 where extended.xml leaves 2.08.
   R["unexplained"] = unexplained(out_dir, fit_.b - written.first, test_.b - written.second);
+  R["left_unexplained"] = left_unexplained(R);
   write_series(out_dir, written.first, written.second);
   result_.timings.outputs += since(t0);
 }
