@@ -110,7 +110,7 @@ std::string report_summary(const nlohmann::json& r) {
         << " of it held out, mostly through " << u["inputs"][0].get<std::string>() << "\n";
   for (const auto& l : r.value("left_unexplained", nlohmann::json::array()))   // #22
     s << "  left on " << l["joint"].get<std::string>() << ": " << pct(l["rel_error_test"].get<double>())
-      << " of its held-out torque, which neither a cause nor a GP over the logged states explains\n";
+      << " of its held-out torque, held by no cause in extended.xml and not predicted from the logged states enough to be `unexplained`\n";
   return s.str();
 }
 
@@ -196,9 +196,10 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
   if (const auto left = r.value("left_unexplained", nlohmann::json::array()); !left.empty()) {   // #22
     s << "\n## Left unexplained\n\n";
     for (const auto& l : left)
-      s << "- " << l["joint"].get<std::string>() << ": the written model leaves " << pct(l["rel_error_test"].get<double>())
-        << " of its held-out torque, and neither a cause nor a GP over the logged states explains it: what is missing does not follow "
-           "from the states (a stop or contact that holds the joint, a load, command or temperature the log does not hold), or the torque is mostly noise\n";
+      s << "- " << l["joint"].get<std::string>() << ": extended.xml leaves " << pct(l["rel_error_test"].get<double>())
+        << " of its held-out torque; no cause in it holds that, and a GP over the logged states does not predict enough of it to report it "
+           "as `unexplained`: what is missing does not follow from the states (a stop or contact that holds the joint, a load, command or "
+           "temperature the log does not hold), or, on a joint whose torque is small against its noise, it is noise\n";
   }
   if (!r["notes"].empty()) {
     s << "\n## Notes\n\n";
