@@ -179,7 +179,7 @@ nlohmann::json Diagnosis::unexplained(const std::string& out_dir, const Eigen::V
 nlohmann::json Diagnosis::left_unexplained(const nlohmann::json& report) const {
   nlohmann::json out = nlohmann::json::array();
   for (const auto& [joint, rel] : report["final"]["rel_error_test"].items()) {
-    if (!(rel.get<double>() > kLeftShare)) continue;
+    if (!rel.is_number() || !(rel.get<double>() > kLeftShare)) continue;
     bool held = false;
     for (const auto& u : report["unexplained"]) held = held || (u["joint"] == joint && u.contains("share"));
     if (!held) out.push_back({{"joint", joint}, {"rel_error_test", rel}});
