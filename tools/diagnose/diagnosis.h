@@ -409,7 +409,7 @@ class Diagnosis {
   bool gap_loose(const Candidate& c, size_t k, size_t principal) const;
   double reversal_crossing(int joint, double v) const;
   bool unresolved_speed(int joint, double v) const;
-  double key_transient(const Candidate& c, size_t k) const;
+  double key_transient(const Candidate& c, size_t k, const Eigen::MatrixXd& fitted, const std::vector<Eigen::Index>& reversals) const;
   void mark_short_transients(Candidate& c);
   std::string resolution_note(int joint, const std::string& keys) const;
   bool shaped(const Candidate& c) const;

@@ -681,34 +681,28 @@ bool Diagnosis::unresolved_speed(int joint, double v) const {
 }
 
 // How long after the joint's reversals shape key k of stateful candidate c moves its force:
-// the difference between the force with the key doubled and the force as fitted, unfiltered,
-// along the fit split; per reversal (one whose difference reaches a tenth of the largest) its
-// area over its peak until the next reversal, an equivalent width finer than the rows; the
-// median in seconds (0: no such reversal, or the plugin refuses the doubled key). LuGre's
-// bristle stiffness and damping move the force only in the pre-sliding after each reversal.
-double Diagnosis::key_transient(const Candidate& c, size_t k) const {
-  auto force = [&](double scale) {
-    std::vector<double> v = c.shape_values;
-    v[k] *= scale;
-    PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, v), "diagnose");
-    return simulated_columns(inst, fit_, false).dense();
-  };
+// the difference between the force with the key doubled and `fitted` (the force as fitted),
+// both unfiltered along the fit split; per reversal (rows `reversals`; one whose difference
+// reaches a tenth of the largest) its area over its peak until the next reversal, an
+// equivalent width finer than the rows; the median in seconds (0: no such reversal, or the
+// plugin refuses the doubled key). LuGre's bristle stiffness and damping move the force only
+// in the pre-sliding after each reversal.
+double Diagnosis::key_transient(const Candidate& c, size_t k, const Eigen::MatrixXd& fitted, const std::vector<Eigen::Index>& reversals) const {
   Eigen::VectorXd diff;
   try {
-    const Eigen::MatrixXd D = force(2) - force(1);
+    std::vector<double> v = c.shape_values;
+    v[k] *= 2;
+    PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, v), "diagnose");
+    const Eigen::MatrixXd D = simulated_columns(inst, fit_, false).dense() - fitted;
     diff = D.col(0).reshaped(fit_.N, D.rows() / fit_.N).rowwise().norm();   // over the outputs it acts on
   } catch (const PluginError&) {
     return 0;
   }
-  const auto qd = fit_.split.X.col(fit_.cols->qd[static_cast<size_t>(c.joint)]);
+  if (!(diff.maxCoeff() > 0)) return 0;
   const Eigen::VectorXd& t = fit_.split.t;
-  if (t.size() != fit_.N || fit_.N < 2 || !(diff.maxCoeff() > 0)) return 0;
-  std::vector<Eigen::Index> rev;
-  for (Eigen::Index i = 1; i < fit_.N; ++i)
-    if (reverses(qd[i - 1], qd[i])) rev.push_back(i);
   std::vector<double> width;
-  for (size_t r = 0; r < rev.size(); ++r) {
-    const Eigen::Index from = rev[r], to = r + 1 < rev.size() ? rev[r + 1] : fit_.N;
+  for (size_t r = 0; r < reversals.size(); ++r) {
+    const Eigen::Index from = reversals[r], to = r + 1 < reversals.size() ? reversals[r + 1] : fit_.N;
     const double peak = diff.segment(from, to - from).maxCoeff();
     if (!(peak >= 0.1 * diff.maxCoeff())) continue;
     double area = 0;
@@ -733,12 +727,25 @@ double Diagnosis::key_transient(const Candidate& c, size_t k) const {
 void Diagnosis::mark_short_transients(Candidate& c) {
   if (c.transients_checked) return;
   c.transients_checked = true;
+  if (fit_.split.t.size() != fit_.N || fit_.N < 2) return;
   const std::vector<bool> level = stateful_space(c).level;
   auto bristle = [&](size_t k) { return !level[k] && c.shape[k]->domain == SPML_SHAPE_ABSOLUTE; };
+  // The force as fitted and the joint's reversals, once for all its keys.
+  Eigen::MatrixXd fitted;
+  try {
+    PluginInstance inst(*c.plugin, reg_->model(), {c.joint}, config_of(c, c.shape_values), "diagnose");
+    fitted = simulated_columns(inst, fit_, false).dense();
+  } catch (const PluginError&) {
+    return;
+  }
+  const auto qd = fit_.split.X.col(fit_.cols->qd[static_cast<size_t>(c.joint)]);
+  std::vector<Eigen::Index> reversals;
+  for (Eigen::Index i = 1; i < fit_.N; ++i)
+    if (reverses(qd[i - 1], qd[i])) reversals.push_back(i);
   double shortest = HUGE_VAL;
   for (size_t k = 0; k < c.shape.size(); ++k)
-    if (const double lasting = bristle(k) ? key_transient(c, k) : 0; lasting > 0) shortest = std::min(shortest, lasting);
-  const double rows = fit_.split.t.size() >= 2 ? 2 * median_step(fit_.split.t) : 0;
+    if (const double lasting = bristle(k) ? key_transient(c, k, fitted, reversals) : 0; lasting > 0) shortest = std::min(shortest, lasting);
+  const double rows = 2 * median_step(fit_.split.t);
   if (!(shortest < rows)) return;
   std::string keys;
   for (size_t k = 0; k < c.shape.size(); ++k)
@@ -838,8 +845,8 @@ void Diagnosis::profile_once(int k, const Fit& current) {
   for (size_t k2 = 0; k2 < c.shape.size(); ++k2)
     if (c.loose(k2) && (level[k2] ? static_cast<int>(k2) != principal && c.shape_values[k2] > 0 : c.shape[k2]->domain == SPML_SHAPE_SPEED))
       hump += std::string(hump.empty() ? "" : ", ") + c.shape[k2]->key;
+  // After the note of short transients (mark_short_transients, which stateful_joins ran first).
   if (!hump.empty()) c.resolution = resolution_note(c.joint, hump) + (c.resolution.empty() ? "" : "; " + c.resolution);
-  mark_short_transients(c);
   if (!speed_loose && !any_loose_level) return;
   // The principal level must be determined by the profile too. settle_levels refuses a loose
   // level by its local standard error, before the profile runs; left loose here, a hidden

@@ -38,7 +38,8 @@ constexpr double kNoiseMargin = 10;
 // A joint whose written model leaves more than this share of its held-out torque (relative
 // error), with no `unexplained` entry, is listed in `left_unexplained`: what is missing there
 // does not follow from the logged states (a stop that holds the joint, a load or temperature
-// the log does not hold), or the torque is mostly noise. Clean draws leave 0.1-0.3 %, the
+// the log does not hold), or, on a joint whose torque is small against its noise, it is noise.
+// Clean draws leave 0.1-0.3 %, the
 // true model of a Stribeck draw 2.3 %; a fifteenth review's rigid joint limit left 26.6 % in
 // silence, a torque drifting in time on the seed table's draws 14-34 %; the real Panda's
 // first joint 11.6 %.
