@@ -1117,10 +1117,14 @@ TEST(DiagnoseBeyond, BristlesStifferThanTheRowsResolveAreNotIdentifiable) {
 // and one goes only where the model without it rolls out better. Seed 208's end stop was read
 // as its joint's armature (0.059), which rolled that joint 1.07 times worse and was kept for
 // another joint's 0.87 (0.93 over the joints): a cause whose own joint rolls out worse with it
-// goes whatever it gives the others.
+// goes whatever it gives the others. Seed 208's cubic damping was read as its joint's damping
+// (0.56 for the model's 0.5), which took a third of that joint's held-out error and left the
+// rest to a GP over its velocity, and rolled two coupled joints worse (j0 by 1.6 %) while
+// better over the joints: a nearest candidate (unexplained.cc), now judged on the worse joints
+// alone.
 TEST(DiagnoseBeyond, AWrittenModelThatRollsOutWorseIsTakenBack) {
   const auto dir = test::temp_dir("taken_back");
-  for (const auto& [kind, s] : std::vector<std::pair<std::string, int>>{{"stop", 224}, {"cubic", 212}, {"stop", 208}}) {
+  for (const auto& [kind, s] : std::vector<std::pair<std::string, int>>{{"stop", 224}, {"cubic", 212}, {"stop", 208}, {"cubic", 208}}) {
     const Draw d = make_draw(dir, kind, s, 0, Measurement{});
     const auto r = run_draw(dir, d, s, 20);
     EXPECT_TRUE(r["rollout"]["worse_on"].empty()) << kind << " " << s << ": named " << joined(named(r)) << "\n" << r["rollout"].dump(1);
@@ -1168,7 +1172,7 @@ TEST(DiagnoseBeyond, DISABLED_SeedTable) {
               << r["delay"]["named"] << "; causes " << joined(named(r)) << "\n   delay: " << r["delay"]["why"].get<std::string>() << "\n";
     for (const auto& cause : r["causes"])
       std::cout << "   cause " << cause["effect"] << " " << cause["joints"].dump() << " " << cause.value("params", nlohmann::json()).dump()
-                << (cause.contains("superseded_by") ? " superseded" : "")
+                << (cause.contains("superseded_by") ? " superseded" : "") << (cause.contains("rejected") ? " REJECTED" : "")
                 << (cause.contains("not_identifiable") ? " not identifiable " + cause["not_identifiable"].dump() : "")
                 << (cause.contains("resolution") ? "\n     resolution: " + cause["resolution"].get<std::string>() : "") << "\n";
     for (const auto& u : r["unexplained"])

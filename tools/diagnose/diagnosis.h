@@ -450,6 +450,8 @@ class Diagnosis {
   nlohmann::json unexplained_joint(size_t o, const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test, std::ostringstream& csv) const;
   nlohmann::json unexplained(const std::string& out_dir, const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test) const;
   nlohmann::json left_unexplained(const nlohmann::json& report) const;
+  std::set<std::string> nearest_candidate_joints(const std::pair<Eigen::VectorXd, Eigen::VectorXd>& written,
+                                                 const std::set<std::string>& among) const;
   // verify.cc
   std::pair<Eigen::VectorXd, Eigen::VectorXd> verify(const std::string& out_dir, MjcfEdits& edits, std::vector<std::string>& notes,
                                                      const Eigen::VectorXd& final_pred_fit);

@@ -48,9 +48,10 @@ std::vector<bool> worse_joints(const RolloutResult& before, const RolloutResult&
 // better than the model `with` it? Yes when it does on the `worse` joints and over all joints
 // (each relative to `before`, the model as given), or, where one of `own` (the cause's joints)
 // is among the worse, on the worse joints and over its own joints together. *own_rule says
-// whether the second clause decided.
+// whether the second clause decided. A `nearest` candidate (its joints keep structure that a GP
+// over the states predicts, unexplained.cc) goes when the worse joints roll out better without it.
 bool better_without_cause(const RolloutResult& before, const RolloutResult& with, const RolloutResult& without,
-                          const std::vector<bool>& worse, const std::vector<bool>& own, bool* own_rule = nullptr);
+                          const std::vector<bool>& worse, const std::vector<bool>& own, bool nearest, bool* own_rule = nullptr);
 
 // Up to three windows worth drawing: the one with the largest end error (each joint's error
 // relative to its mean over the windows: joints differ in units), the median one and the smallest.
