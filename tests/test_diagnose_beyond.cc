@@ -1142,6 +1142,66 @@ TEST(DiagnoseBeyond, AWrittenModelThatRollsOutWorseIsTakenBack) {
   }
 }
 
+// A cause kept beside structure it does not hold says so, and a cross record (a fresh log of
+// the same robot) is scored with extended.xml as written. Cubic damping (seed 200) read as its
+// joint's damping is kept - its rollouts are better - beside `unexplained` on that joint
+// through qd:, and is now marked `nearest_candidate`; a real damping error (true 0.35 for 0.5,
+// seed 223), whose joint keeps a GP-predictable residual too but a twentieth of what
+// `parameters` took there, is not. Cubic 212's `parameters` is rejected: its cross record
+// stated the fit's error for an extended.xml that is the model as given (a review's cubic
+// damping: 23.2 -> 14 %, where the file scored 23.2). A delay corrected in the cross record
+// also states the model as given on the torques as measured.
+TEST(DiagnoseBeyond, ANearestCandidateIsMarkedAndCrossRecordsScoreTheWrittenFile) {
+  const auto dir = test::temp_dir("nearest");
+  auto run_with_cross = [&](const Draw& d, int s) {
+    const std::string stem = (dir / (d.what.substr(0, d.what.find(' ')) + std::to_string(s))).string();
+    DiagnoseOptions opt;
+    opt.model = d.c.user;
+    opt.data = measured(d.c, stem + ".h5", static_cast<unsigned>(0x7ab1e00 + s) + 100, d.m);
+    opt.cross = {measured(d.c, stem + "_fresh.h5", static_cast<unsigned>(0x7ab1e00 + s) + 300, d.m)};
+    opt.rollouts = 20;
+    return diagnose(opt, "").report;
+  };
+  auto kept = [](const nlohmann::json& r, const std::string& effect) -> const nlohmann::json* {
+    for (const auto& c : r["causes"])
+      if (c["effect"] == effect && !c.contains("rejected") && !c.contains("superseded_by")) return &c;
+    return nullptr;
+  };
+  {
+    const Draw d = make_draw(dir, "cubic", 200, 0, Measurement{});
+    const auto r = run_with_cross(d, 200);
+    const nlohmann::json* p = kept(r, "parameters");
+    ASSERT_NE(p, nullptr) << joined(named(r));
+    EXPECT_TRUE(p->contains("nearest_candidate")) << p->dump();
+    if (p->contains("nearest_candidate")) {
+      EXPECT_EQ((*p)["nearest_candidate"]["joint"], "j" + std::to_string(d.joint));
+    }
+    EXPECT_LT(r["cross"][0]["rel_error_final"].get<double>(), r["cross"][0]["rel_error_given"].get<double>()) << r["cross"].dump();
+  }
+  {
+    Draw d = make_draw(dir, "clean", 223, 0, Measurement{});
+    with_true_damping(d, "0.35");
+    const auto r = run_with_cross(d, 223);
+    const nlohmann::json* p = kept(r, "parameters");
+    ASSERT_NE(p, nullptr) << joined(named(r));
+    EXPECT_FALSE(p->contains("nearest_candidate")) << p->dump();
+  }
+  {
+    const Draw d = make_draw(dir, "cubic", 212, 0, Measurement{});
+    const auto r = run_with_cross(d, 212);
+    EXPECT_EQ(kept(r, "parameters"), nullptr) << joined(named(r));
+    const double given = r["cross"][0]["rel_error_given"].get<double>();
+    EXPECT_NEAR(r["cross"][0]["rel_error_final"].get<double>(), given, 1e-6 * given) << r["cross"].dump();
+  }
+  {
+    const Draw d = make_draw(dir, "delay", 200, 5, Measurement{});
+    const auto r = run_with_cross(d, 200);
+    ASSERT_TRUE(r["delay"]["named"].get<bool>()) << r["delay"].dump();
+    ASSERT_TRUE(r["cross"][0].contains("rel_error_given_as_measured")) << r["cross"].dump();
+    EXPECT_GT(r["cross"][0]["rel_error_given_as_measured"].get<double>(), 2 * r["cross"][0]["rel_error_given"].get<double>());
+  }
+}
+
 // A probe over seeds, for the tables of the issue (not run by ctest: --gtest_also_run_disabled_tests).
 // SPML_BEYOND_KIND: a kind of make_draw; SPML_BEYOND_FIRST, SPML_BEYOND_SEEDS: the seeds;
 // SPML_BEYOND_DELAY_MS; SPML_BEYOND_NOISE (torque noise fraction); SPML_BEYOND_BITS;

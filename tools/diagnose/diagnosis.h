@@ -450,6 +450,7 @@ class Diagnosis {
   nlohmann::json unexplained_joint(size_t o, const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test, std::ostringstream& csv) const;
   nlohmann::json unexplained(const std::string& out_dir, const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test) const;
   nlohmann::json left_unexplained(const nlohmann::json& report) const;
+  void mark_nearest_candidates(nlohmann::json& report, const Eigen::VectorXd& r_test) const;
   std::set<std::string> nearest_candidate_joints(const std::pair<Eigen::VectorXd, Eigen::VectorXd>& written,
                                                  const std::set<std::string>& among) const;
   // verify.cc

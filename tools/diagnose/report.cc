@@ -76,6 +76,10 @@ std::string params_text(const nlohmann::json& c, const std::string& sep) {
   return out;
 }
 
+// A named delay (not the logger's half tick, corrected without a name: its "before" differs
+// in the third digit and says nothing).
+bool delay_named(const nlohmann::json& r) { return r.contains("delay") && r["delay"].value("named", false); }
+
 }  // namespace
 
 std::string report_summary(const nlohmann::json& r) {
@@ -93,6 +97,8 @@ std::string report_summary(const nlohmann::json& r) {
     s << "  (dBIC " << num(c["delta_bic"].get<double>(), 5) << ", test error after " << pct(c["rel_error_test_after_all"].get<double>()) << ")";
     if (c.contains("superseded_by")) s << "  " << superseded_text(c);
     if (c.contains("rejected")) s << "  REJECTED: " << c["rejected"].value("summary", "in simulation, rollouts worse with it");
+    if (c.contains("nearest_candidate"))
+      s << "  nearest candidate: " << c["nearest_candidate"]["joint"].get<std::string>() << " keeps structure it does not hold (unexplained)";
     if (c.contains("replaces_model_friction")) s << "  replaces the model's own level " << replaced_text(c["replaces_model_friction"]);
     s << "\n";
   }
@@ -102,7 +108,8 @@ std::string report_summary(const nlohmann::json& r) {
   s << "  final: relative error on test " << pct(r["final"]["rel_error_test_all"].get<double>()) << "\n";
   for (const auto& c : r.value("cross", nlohmann::json::array()))
     s << "  cross " << c["data"].get<std::string>() << " '" << c["split"].get<std::string>() << "': " << pct(c["rel_error_given"].get<double>())
-      << " as given -> " << pct(c["rel_error_final"].get<double>()) << "\n";
+      << " as given" << (c.contains("rel_error_given_as_measured") && delay_named(r) ? " (" + pct(c["rel_error_given_as_measured"].get<double>()) + " before the delay's correction)" : "")
+      << " -> " << pct(c["rel_error_final"].get<double>()) << " extended.xml\n";
   for (const auto& n : r["not_identifiable"]) s << "  not identifiable: " << n["joint"].get<std::string>() << "\n";
   for (const auto& u : r.value("unexplained", nlohmann::json::array()))   // #22
     if (u.contains("share"))
@@ -136,11 +143,12 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
   }
   s << "| all | | | " << pct(r["baseline"]["rel_error_test_all"].get<double>()) << " | " << pct(r["final"]["rel_error_test_all"].get<double>()) << " |\n";
   if (r.contains("cross")) {
-    s << "\n## Other records (not used for the selection): relative error, all joints\n\n| data | split | as given | after each cause | final |\n|---|---|---|---|---|\n";
+    s << "\n## Other records (not used for the selection): relative error, all joints\n\n| data | split | as given | after each cause (the fit's) | extended.xml |\n|---|---|---|---|---|\n";
     for (const auto& c : r["cross"]) {
       std::string steps;
       for (const auto& v : c["rel_error_after_each_cause"]) steps += (steps.empty() ? "" : " → ") + pct(v.get<double>());
       s << "| `" << c["data"].get<std::string>() << "` | " << c["split"].get<std::string>() << " | " << pct(c["rel_error_given"].get<double>())
+        << (c.contains("rel_error_given_as_measured") && delay_named(r) ? " (" + pct(c["rel_error_given_as_measured"].get<double>()) + " before the delay's correction)" : "")
         << " | " << steps << " | " << pct(c["rel_error_final"].get<double>()) << " |\n";
     }
   }
@@ -155,6 +163,7 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
       << pct(c["rel_error_test_after_all"].get<double>());
     if (c.contains("superseded_by")) s << " (" << superseded_text(c) << ")";
     if (c.contains("rejected")) s << " - **rejected, not in extended.xml**: " << c["rejected"].value("reason", "");
+    if (c.contains("nearest_candidate")) s << " - **a nearest candidate**: " << c["nearest_candidate"]["why"].get<std::string>();
     if (c.contains("replaces_model_friction"))
       s << " - replaces the model's own friction level " << replaced_text(c["replaces_model_friction"]) << " (0 in extended.xml)";
     s << "\n   - " << params_text(c, "\n   - ") << "\n";
@@ -198,8 +207,9 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
     for (const auto& l : left)
       s << "- " << l["joint"].get<std::string>() << ": extended.xml leaves " << pct(l["rel_error_test"].get<double>())
         << " of its held-out torque; no cause in it holds that, and a GP over the logged states does not predict enough of it to report it "
-           "as `unexplained`: what is missing does not follow from the states (a stop or contact that holds the joint, a load, command or "
-           "temperature the log does not hold), or, on a joint whose torque is small against its noise, it is noise\n";
+           "as `unexplained`: what is missing depends on something the log does not hold (a load, a command, a temperature), or on the "
+           "states too steeply for the GP's rows (a rigid stop or contact, whose force changes over a few encoder counts), or, on a joint "
+           "whose torque is small against its noise, it is noise\n";
   }
   if (!r["notes"].empty()) {
     s << "\n## Notes\n\n";

@@ -131,6 +131,18 @@ std::pair<Eigen::VectorXd, Eigen::VectorXd> Diagnosis::verify(const std::string&
   R["extended_check"] = {{"max_abs_deviation", (written.first - final_pred_fit).cwiseAbs().maxCoeff()},
                          {"rms_torque", rms(fit_.b)}};
   R["final"] = metrics(fit_.b - written.first, test_.b - written.second);
+  // The cross records scored with extended.xml as written, as `final` is: a cause rejected in
+  // simulation or by the held-out guard is not in it (a review's cubic damping read as its
+  // joint's damping, rejected: its cross record said 23.2 -> 14 % for a file that is the model
+  // as given).
+  if (R.contains("cross")) {
+    const MjcfRegressor ext(ext_path);
+    const auto ebase = ext.base_parameters();
+    for (size_t k = 0; k < cross_.size() && k < R["cross"].size(); ++k) {
+      const SplitData& s = cross_[k].second;
+      R["cross"][k]["rel_error_final"] = (s.b - written_prediction(ext, ebase, s)).norm() / s.b.norm();
+    }
+  }
   R["needs_spml_plugins"] = report_written_form(edits, notes);   // what stays a plugin text (written_form.cc)
   result_.timings.outputs += since(t0);
   t0 = Clock::now();
@@ -189,7 +201,7 @@ void Diagnosis::run_rollouts(const std::string& ext_path, const std::string& out
     for (const auto& w : worse) {
       bool own = false;
       for (const auto& c : R["causes"])
-        if (!c.contains("superseded_by") && !c.contains("rejected"))
+        if (!c.contains("superseded_by") && !c.contains("rejected") && c["effect"] != "delay")   // a delay moves every joint's data, not one joint
           for (const auto& j : c.value("joints", nlohmann::json::array())) own = own || j == w;
       (own ? with_cause : without).push_back(w);
     }
