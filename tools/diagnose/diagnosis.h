@@ -295,6 +295,7 @@ class Diagnosis {
   void load_cross();
   void map_outputs();
   void note_frictionloss();
+  void note_limits();
   Eigen::VectorXd frictionloss_correction(const SplitData& d, const mjModel* m) const;
   void add_declared_forces(const SplitData& d, Eigen::VectorXd& into) const;
   // prepare.cc
