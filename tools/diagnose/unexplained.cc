@@ -45,9 +45,10 @@ constexpr double kNoiseMargin = 10;
 // silence, a torque drifting in time on the seed table's draws 14-34 %; the real Panda's
 // first joint 11.6 %.
 constexpr double kLeftShare = 0.05;
-// A cause is the nearest candidate of an effect outside the vocabulary where its joint keeps
-// structure (the two tests above) of this share or more of what the written causes took there
-// (nearest_candidate_joints).
+// A joint where the written causes are the nearest candidate of an effect outside the
+// vocabulary keeps structure (the two tests above) of this share or more of what they took
+// there (nearest_candidate_joints: confirm.cc judges a cause so where every joint it lists is
+// such a joint; mark_nearest_candidates marks a kept cause on any of them).
 constexpr double kNearest = 1.0 / 3;
 constexpr Eigen::Index kFitRows = 200;  // rows the GP is fitted on (evenly spaced; cubic cost)
 constexpr Eigen::Index kTestRows = 1500;
