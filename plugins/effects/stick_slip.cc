@@ -22,9 +22,11 @@ struct StickSlip {
   static constexpr bool kStateful = true;
   // Searched when diagnose fits it by simulation: the Stribeck speed as a fraction of the top
   // speed, the bristle stiffness and damping absolute (fc, fs, sigma2 are levels it scales).
+  // sigma1 up to 1e4: LuGre's textbook bristles are sigma0 1e5, sigma1 sqrt(1e5) = 316
+  // (Canudas de Wit et al. 1995), which a range ending at 1e2 left to `coulomb` on a slide.
   static constexpr spml_shape_param kShape[] = {{"vs", SPML_SHAPE_SPEED, 0.005, 0.5, 1, 0},
                                                 {"sigma0", SPML_SHAPE_ABSOLUTE, 10, 1e6, 1, 0},
-                                                {"sigma1", SPML_SHAPE_ABSOLUTE, 1e-3, 1e2, 1, 0},
+                                                {"sigma1", SPML_SHAPE_ABSOLUTE, 1e-3, 1e4, 1, 0},
                                                 {nullptr, 0, 0, 0, 0, 0}};
 
   explicit StickSlip(const EffectConfig& c) : joints(c.joints), z(c.joints.size(), 0.0) {

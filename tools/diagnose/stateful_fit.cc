@@ -339,19 +339,24 @@ void Diagnosis::fit_stateful(Candidate& c, const Fit& current) {
 // on the plateau of stiff bristles, a drop of 7.13 and 6.06 where the truth gives 7.79 and 7.26.)
 std::vector<double> Diagnosis::grid_start(const Candidate& c, const Fit& current, const std::vector<bool>& level,
                                           const std::vector<double>& lb, const std::vector<double>& ub, const std::vector<double>& x) const {
+  // 7 cells per key, and as many more as keep a cell within 0.72 decades (LuGre's sigma1
+  // searched over 7 decades: 10 cells).
   constexpr int kPerKey = 7;
+  const double widest = std::log(10.0) * 5.0 / kPerKey;
   std::vector<size_t> keys;
+  std::vector<int> cells;
   for (size_t k = 0; k < x.size(); ++k)
-    if (!level[k]) keys.push_back(k);
+    if (!level[k]) keys.push_back(k), cells.push_back(std::max(kPerKey, static_cast<int>(std::ceil((ub[k] - lb[k]) / widest - 1e-9))));
   size_t total = 1;
-  for (size_t i = 0; i < keys.size(); ++i) total *= kPerKey;
+  for (const int n : cells) total *= static_cast<size_t>(n);
   if (keys.empty() || total > 2401) return {};
   std::vector<std::vector<double>> points(total, x);
   for (size_t idx = 0; idx < total; ++idx) {
     size_t rest = idx;
-    for (size_t k : keys) {
-      points[idx][k] = lb[k] + (ub[k] - lb[k]) * (static_cast<double>(rest % kPerKey) + 0.5) / kPerKey;
-      rest /= kPerKey;
+    for (size_t i = 0; i < keys.size(); ++i) {
+      const size_t k = keys[i], n = static_cast<size_t>(cells[i]);
+      points[idx][k] = lb[k] + (ub[k] - lb[k]) * (static_cast<double>(rest % n) + 0.5) / static_cast<double>(n);
+      rest /= n;
     }
   }
   const std::vector<double> drop = drops_at(c, current, points);
