@@ -157,7 +157,7 @@ bool Diagnosis::confirm_in_simulation(const std::string& ext_path, MjcfEdits& ed
     // only, and nothing rejected).
     auto on_worse = [&](const nlohmann::json& c) {
       const bool everywhere = c["effect"] == "parameters" && !edits.inertials.empty();
-      return !c.contains("superseded_by") && !c.contains("rejected") && (everywhere || on_joints(c, before.joints, worse));
+      return kept_cause(c) && (everywhere || on_joints(c, before.joints, worse));
     };
     for (bool dropped = true; dropped;) {
       dropped = false;
@@ -169,7 +169,7 @@ bool Diagnosis::confirm_in_simulation(const std::string& ext_path, MjcfEdits& ed
       // joint rolled the two joints after it 25 and 6 % worse (stop seed 211, 30 s).
       std::set<std::string> tried_joints, nearest;
       for (const auto& c : causes)
-        if (!c.contains("superseded_by") && !c.contains("rejected") && (c["effect"] == "parameters" || c.contains("declaration")))
+        if (kept_cause(c) && (c["effect"] == "parameters" || c.contains("declaration")))
           for (const auto& j : c["joints"]) tried_joints.insert(j.get<std::string>());
       if (!tried_joints.empty()) {
         MjcfEdits copy = edits;
@@ -195,11 +195,12 @@ bool Diagnosis::confirm_in_simulation(const std::string& ext_path, MjcfEdits& ed
           }
         return any;
       };
+      auto nearest_cause = [&](const nlohmann::json& c) { return kept_cause(c) && is_nearest(joint_flags(c, before.joints)); };
       nlohmann::json record;
       for (auto i = static_cast<std::ptrdiff_t>(causes.size()) - 1; i >= 0 && !dropped; --i) {
         nlohmann::json& c = causes[static_cast<size_t>(i)];
         const std::vector<bool> own = joint_flags(c, before.joints);
-        if (!on_worse(c) && (c.contains("superseded_by") || c.contains("rejected") || !is_nearest(own))) continue;
+        if (!on_worse(c) && !nearest_cause(c)) continue;
         if (c["effect"] != "parameters") {
           if (c.contains("declaration") && (dropped = better_without(without_cause(edits, c), record, own, is_nearest(own))))
             c["rejected"] = record;
@@ -228,7 +229,7 @@ bool Diagnosis::confirm_in_simulation(const std::string& ext_path, MjcfEdits& ed
       bool any_nearest = false;
       for (auto& c : causes) {
         if (c["effect"] != "parameters" && !c.contains("declaration")) continue;
-        const bool near = !c.contains("superseded_by") && !c.contains("rejected") && is_nearest(joint_flags(c, before.joints));
+        const bool near = nearest_cause(c);
         if (!on_worse(c) && !near) continue;
         trial = without_cause(trial, c);
         together.push_back(&c);
@@ -419,7 +420,7 @@ bool Diagnosis::guard_held_out(const std::string& ext_path, MjcfEdits& edits, st
     if (!worse()) return true;
   }
   for (auto& c : R["causes"])
-    if (!c.contains("superseded_by") && !c.contains("rejected")) c["rejected"] = record;
+    if (kept_cause(c)) c["rejected"] = record;
   MjcfEdits none;
   none.comment = edits.comment;
   edits = none;

@@ -127,6 +127,8 @@ inline bool one_thread(const Candidate& c) { return !force_plugin_independent(*c
 
 // `parameters`' part of the edits: joint attributes, body inertials, and the declared plugins'
 // own texts with their re-identified parameters (identified_model_edits).
+// A cause of report.json that extended.xml holds: neither superseded by a later one nor rejected.
+inline bool kept_cause(const nlohmann::json& c) { return !c.contains("superseded_by") && !c.contains("rejected"); }
 inline bool writes_parameters(const MjcfEdits& e) { return !e.joint_attributes.empty() || !e.inertials.empty() || !e.replaced_texts.empty(); }
 inline void drop_parameters(MjcfEdits& e) {
   e.joint_attributes.clear();
@@ -408,6 +410,7 @@ class Diagnosis {
   void profile_once(int k, const Fit& current);
   int principal_level(const Candidate& c, const std::vector<bool>& level) const;
   bool gap_loose(const Candidate& c, size_t k, size_t principal) const;
+  std::vector<Eigen::Index> reversal_rows(int joint) const;
   double reversal_crossing(int joint, double v) const;
   bool unresolved_speed(int joint, double v) const;
   double key_transient(const Candidate& c, size_t k, const Eigen::MatrixXd& fitted, const std::vector<Eigen::Index>& reversals) const;

@@ -51,9 +51,7 @@ Eigen::VectorXd Diagnosis::away_from_reversals(double* half_width_s) const {
   if (half_width_s) *half_width_s = half;
   const auto w = static_cast<Eigen::Index>(std::ceil(half / dt));
   for (Eigen::Index o = 0; o < O; ++o) {
-    const auto col = fit_.cols->qd[static_cast<size_t>(out_joint_index_[static_cast<size_t>(o)])];
-    for (Eigen::Index i = 1; i < N; ++i) {
-      if (!reverses(fit_.split.X(i - 1, col), fit_.split.X(i, col))) continue;
+    for (const Eigen::Index i : reversal_rows(out_joint_index_[static_cast<size_t>(o)])) {
       const Eigen::Index from = std::max<Eigen::Index>(0, i - w), to = std::min<Eigen::Index>(N - 1, i + w);
       mask.segment(o * N + from, to - from + 1).setZero();
     }

@@ -199,10 +199,10 @@ nlohmann::json Diagnosis::cross_report(const Fit& final_fit, bool free, const nl
     const SplitData& s = cross_[k].second;
     nlohmann::json after = nlohmann::json::array();
     for (const auto& step : cross_after) after.push_back(step[k]);
-    // rel_error_final is set again by verify(), to what extended.xml as written predicts.
+    // rel_error_final, what extended.xml as written predicts, is added by verify().
     cross.push_back({{"data", cross_[k].first}, {"split", s.name}, {"rows", s.N},
                      {"rel_error_given", s.y0.norm() / s.b.norm()}, {"rel_error_after_each_cause", after},
-                     {"rel_error_final", fin[k]}, {"rel_error_final_internal", fin[k]}});
+                     {"rel_error_final_internal", fin[k]}});
     // A delay corrected in this record: the model as given on the torques as measured too (a
     // review's 3 ms lag: 0.195 % as given on the corrected record, 0.826 % as measured).
     for (const auto& o : delay_.other)

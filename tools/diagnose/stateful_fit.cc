@@ -339,8 +339,8 @@ void Diagnosis::fit_stateful(Candidate& c, const Fit& current) {
 // on the plateau of stiff bristles, a drop of 7.13 and 6.06 where the truth gives 7.79 and 7.26.)
 std::vector<double> Diagnosis::grid_start(const Candidate& c, const Fit& current, const std::vector<bool>& level,
                                           const std::vector<double>& lb, const std::vector<double>& ub, const std::vector<double>& x) const {
-  // 7 cells per key, and as many more as keep a cell within 0.72 decades (LuGre's sigma1
-  // searched over 7 decades: 10 cells).
+  // 7 cells per key, and as many more as keep a cell within the 0.71 decades that 7 cells
+  // give sigma0's 5 (LuGre's sigma1, searched over 7 decades: 10 cells).
   constexpr int kPerKey = 7;
   const double widest = std::log(10.0) * 5.0 / kPerKey;
   std::vector<size_t> keys;
@@ -665,14 +665,21 @@ bool Diagnosis::gap_loose(const Candidate& c, size_t k, size_t p) const {
   return !(std::sqrt(std::max(var, 0.0)) <= kNotIdentifiable * gap);
 }
 
+// The fit split's rows i where the joint's velocity changes sign from row i - 1.
+std::vector<Eigen::Index> Diagnosis::reversal_rows(int joint) const {
+  const auto qd = fit_.split.X.col(fit_.cols->qd[static_cast<size_t>(joint)]);
+  std::vector<Eigen::Index> rows;
+  for (Eigen::Index i = 1; i < qd.size(); ++i)
+    if (reverses(qd[i - 1], qd[i])) rows.push_back(i);
+  return rows;
+}
+
 // How long the joint takes, at its reversals, to cross a speed `v`: 2 v over the median |qdd|
 // of the fit split's rows where qd changes sign (0: no reversal).
 double Diagnosis::reversal_crossing(int joint, double v) const {
-  const auto qd = fit_.split.X.col(fit_.cols->qd[static_cast<size_t>(joint)]);
   const auto qdd = fit_.split.X.col(fit_.cols->qdd[static_cast<size_t>(joint)]);
   std::vector<double> a;
-  for (Eigen::Index i = 1; i < qd.size(); ++i)
-    if (reverses(qd[i - 1], qd[i])) a.push_back(std::fabs(0.5 * (qdd[i] + qdd[i - 1])));
+  for (const Eigen::Index i : reversal_rows(joint)) a.push_back(std::fabs(0.5 * (qdd[i] + qdd[i - 1])));
   const double median = quantile(std::move(a), 0.5);
   return median > 0 ? 2 * v / median : 0;
 }
@@ -743,10 +750,7 @@ void Diagnosis::mark_short_transients(Candidate& c) {
   } catch (const PluginError&) {
     return;
   }
-  const auto qd = fit_.split.X.col(fit_.cols->qd[static_cast<size_t>(c.joint)]);
-  std::vector<Eigen::Index> reversals;
-  for (Eigen::Index i = 1; i < fit_.N; ++i)
-    if (reverses(qd[i - 1], qd[i])) reversals.push_back(i);
+  const std::vector<Eigen::Index> reversals = reversal_rows(c.joint);
   double shortest = HUGE_VAL;
   for (size_t k = 0; k < c.shape.size(); ++k)
     if (const double lasting = bristle(k) ? key_transient(c, k, fitted, reversals) : 0; lasting > 0) shortest = std::min(shortest, lasting);

@@ -137,6 +137,13 @@ JointGp joint_gp(const SplitData& fit, const SplitData& test, Eigen::Index o, co
   return j;
 }
 
+// What the written causes took from output o's held-out torque: the RMS of the model as given's
+// residual there against the written model's (`r_test`), in quadrature.
+double taken_rms(const SplitData& test, Eigen::Index o, const Eigen::VectorXd& r_test) {
+  const double given = rms(test.y0.segment(o * test.N, test.N)), left = rms(r_test.segment(o * test.N, test.N));
+  return std::sqrt(std::max(0.0, given * given - left * left));
+}
+
 }  // namespace
 
 // One joint: the GP on its fit residual, scored held out. Returns null when nothing is left.
@@ -216,8 +223,7 @@ std::set<std::string> Diagnosis::nearest_candidate_joints(const std::pair<Eigen:
   for (size_t o = 0; o < out_joints_.size(); ++o) {
     if (still_[static_cast<size_t>(out_joint_index_[o])] || !among.count(out_joints_[o])) continue;
     const auto oi = static_cast<Eigen::Index>(o);
-    const double given = rms(test_.y0.segment(oi * test_.N, test_.N)), left = rms(r_test.segment(oi * test_.N, test_.N));
-    const double took = std::sqrt(std::max(0.0, given * given - left * left));
+    const double took = taken_rms(test_, oi, r_test);
     if (!(took > 0)) continue;
     try {
       const JointGp j = joint_gp(fit_, test_, oi, r_fit, r_test);
@@ -239,14 +245,12 @@ void Diagnosis::mark_nearest_candidates(nlohmann::json& report, const Eigen::Vec
     if (!u.contains("share")) continue;
     const auto at = std::find(out_joints_.begin(), out_joints_.end(), u["joint"].get<std::string>());
     if (at == out_joints_.end()) continue;
-    const auto oi = static_cast<Eigen::Index>(at - out_joints_.begin());
-    const double given = rms(test_.y0.segment(oi * test_.N, test_.N)), left = rms(r_test.segment(oi * test_.N, test_.N));
-    const double took = std::sqrt(std::max(0.0, given * given - left * left));
+    const double took = taken_rms(test_, static_cast<Eigen::Index>(at - out_joints_.begin()), r_test);
     const double rmse = u["rmse_test"].get<double>(), with_gp = u["rmse_test_with_gp"].get<double>();
     const double explained = std::sqrt(std::max(0.0, rmse * rmse - with_gp * with_gp));
     if (!(took > 0) || !(explained >= kNearest * took)) continue;
     for (auto& c : report["causes"]) {
-      if (c.contains("superseded_by") || c.contains("rejected") || c["effect"] == "delay") continue;
+      if (!kept_cause(c) || c["effect"] == "delay") continue;
       const auto& js = c.value("joints", nlohmann::json::array());
       if (std::find(js.begin(), js.end(), *at) == js.end() || c.contains("nearest_candidate")) continue;
       c["nearest_candidate"] = {

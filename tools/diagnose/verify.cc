@@ -201,7 +201,7 @@ void Diagnosis::run_rollouts(const std::string& ext_path, const std::string& out
     for (const auto& w : worse) {
       bool own = false;
       for (const auto& c : R["causes"])
-        if (!c.contains("superseded_by") && !c.contains("rejected") && c["effect"] != "delay")   // a delay moves every joint's data, not one joint
+        if (kept_cause(c) && c["effect"] != "delay")   // a delay moves every joint's data, not one joint
           for (const auto& j : c.value("joints", nlohmann::json::array())) own = own || j == w;
       (own ? with_cause : without).push_back(w);
     }

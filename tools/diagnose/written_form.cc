@@ -92,8 +92,8 @@ nlohmann::json Diagnosis::report_written_form(const MjcfEdits& edits, std::vecto
   std::vector<std::string> native, ignored;
   for (auto& c : causes) {
     // What a friction takes over is said only where extended.xml writes it (own_friction.cc).
-    if (c.contains("rejected") || c.contains("superseded_by")) c.erase("replaces_model_friction");
-    if (!c.contains("declaration") || c.contains("rejected") || c.contains("superseded_by")) continue;
+    if (!kept_cause(c)) c.erase("replaces_model_friction");
+    if (!c.contains("declaration") || !kept_cause(c)) continue;
     const std::string data = c["declaration"].get<std::string>();
     const std::string what = c["effect"].get<std::string>() + "@" + c["joints"][0].get<std::string>();
     if (c.contains("replaces_model_friction"))
