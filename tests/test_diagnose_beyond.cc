@@ -13,12 +13,14 @@
 #include <iostream>
 #include <map>
 #include <random>
+#include <set>
 #include <tuple>
 #include <cstdlib>
 
 #include "spml/dataset.h"
 #include "spml/diagnose.h"
 #include "spml/envs/measured_run.h"
+#include "spml/envs/mjcf_regressor.h"
 #include "spml/envs/mujoco_model.h"
 #include "spml/import.h"
 #include "diagnose_draws.h"
@@ -1228,6 +1230,114 @@ TEST(DiagnoseBeyond, RowsPastAJointLimitAreSaid) {
   for (const auto& n : r["notes"]) EXPECT_EQ(n.get<std::string>().find("joint 'j1': "), std::string::npos) << n;
 }
 
+// A `parameters` cause whose every listed term is a joint's own attribute is written as those
+// terms alone (parameters_written "listed"), the MJCF's inertials kept. A damping error (0.35
+// for 0.5) was written with every body re-identified by the consistent fit beside it: draw
+// 223's damped joint kept 0.0184 of its held-out torque where the true model leaves 0.0026,
+// and draw 213's light joint was 3.1 times worse (RMS) than as given, which the held-out guard
+// then refused, cause and all. Written alone, each is the true model within the estimate.
+TEST(DiagnoseBeyond, AJointsOwnTermsAreWrittenAlone) {
+  const auto dir = test::temp_dir("listed");
+  for (int s : {223, 213}) {
+    Draw d = make_draw(dir, "clean", s, 0, Measurement{});
+    with_true_damping(d, "0.35");
+    const std::string data = measured(d.c, (dir / ("damping" + std::to_string(s) + ".h5")).string(), static_cast<unsigned>(0x7ab1e00 + s) + 100, d.m);
+    DiagnoseOptions opt;
+    opt.model = d.c.user;
+    opt.data = data;
+    opt.rollouts = 5;
+    const auto out = dir / ("out" + std::to_string(s));
+    const auto r = diagnose(opt, out.string()).report;
+    opt.model = d.c.truth;
+    opt.rollouts = 0;
+    const auto truth = diagnose(opt, "").report;
+    EXPECT_EQ(r["parameters_written"], "listed") << s << ": " << r["notes"].dump(1);
+    const std::string joint = "j" + std::to_string(d.joint);
+    const MjcfRegressor written((out / "extended.xml").string()), given(d.c.user);
+    const auto names = given.param_names();
+    for (size_t k = 0; k < names.size(); ++k) {
+      const double w = written.model_params()[static_cast<Eigen::Index>(k)], g = given.model_params()[static_cast<Eigen::Index>(k)];
+      if (names[k] == "damping:" + joint)
+        EXPECT_NEAR(w, 0.35, 0.03 * 0.35) << s;
+      else
+        EXPECT_NEAR(w, g, 1e-9 + 1e-6 * std::fabs(g)) << s << " " << names[k];
+    }
+    for (const auto& [j, t] : truth["baseline"]["rmse_test"].items())
+      EXPECT_LE(r["final"]["rmse_test"][j].get<double>(), 1.05 * t.get<double>()) << s << " " << j << ": the written model against the true one";
+  }
+}
+
+// A joint no cause touches keeps its held-out torque. An eighteenth review's gantry (a 6 kg
+// slide, two hinges, a 0.25 kg wrist about its own axis) with a weak cable (a spatial tendon
+// with a spring, outside the vocabulary) from the world to the second link: `parameters` was
+// written with the hand's mass 0.078 kg, and the wrist, whose torque is a thousandth of the
+// slide's, predicted its held-out torque 6.8 times worse (RMS, 0.22 -> 1.46 %), inside a
+// geometric mean over the joints of 0.5. The written fit weighted each joint by its residual in
+// the unweighted free fit, where the wrist held the large joints' misfit (700 times its noise);
+// now by the smaller of that and its residual with the MJCF's own parameters. The held-out
+// guard also refuses a written model with one joint's RMS twice its own as given.
+const char* kGantry = R"(<mujoco model="gantry">
+  <compiler angle="radian" inertiafromgeom="false"/>
+  <option timestep="0.001" gravity="0 0 -9.81"><flag contact="disable"/></option>
+  <default><joint type="hinge" armature="0.05" damping="0.4"/><geom type="capsule" size="0.02" contype="0" conaffinity="0"/></default>
+  <worldbody>
+    <site name="anchor" pos="0.3 0 1.3"/>
+    <body name="carriage" pos="0 0 0.5">
+      <joint name="rail" type="slide" axis="1 0 0" armature="2.0" damping="8"/>
+      <inertial pos="0 0 0" mass="6.0" diaginertia="0.05 0.05 0.05"/>
+      <body name="link1" pos="0 0 0.05">
+        <joint name="lift" axis="0 1 0" armature="0.12" damping="0.9"/>
+        <inertial pos="0.15 0 0.01" mass="1.8" diaginertia="0.002 0.018 0.017"/>
+        <body name="link2" pos="0.3 0 0">
+          <joint name="bend" axis="0 1 0" armature="0.04" damping="0.3"/>
+          <inertial pos="0.11 0 0" mass="0.7" diaginertia="0.0006 0.004 0.0038"/>
+          <site name="s2" pos="0.2 0 0.02"/>
+          <body name="hand" pos="0.22 0 0">
+            <joint name="roll" axis="1 0 0" armature="0.002" damping="0.01"/>
+            <inertial pos="0.02 0.015 0" mass="0.25" diaginertia="0.0002 0.00015 0.00015"/>
+          </body>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+  CABLE
+</mujoco>
+)";
+
+TEST(DiagnoseBeyond, AJointNoCauseListsKeepsItsHeldOutTorque) {
+  const auto dir = test::temp_dir("cable");
+  auto model = [](const std::string& cable) {
+    std::string xml = kGantry;
+    return xml.replace(xml.find("CABLE"), 5, cable);
+  };
+  Case c;
+  c.joints = 4;
+  c.user = (dir / "given.xml").string();
+  c.truth = (dir / "cable.xml").string();
+  std::ofstream(c.user) << model("");
+  std::ofstream(c.truth) << model(R"(<tendon><spatial name="cable" stiffness="8" springlength="0.6"><site site="anchor"/><site site="s2"/></spatial></tendon>)");
+  Measurement m;
+  m.duration = 30;
+  m.lowpass_hz = 20;
+  m.drop_edges = 307;
+  const auto r = diagnose_case(c, measured(c, (dir / "cable.h5").string(), 62, m), 20);
+  // Every joint no kept cause lists (the wrist: the cable does not reach it) within 1.25 times
+  // its RMS as given; and none, listed or not, past the guard's bar of 2.
+  std::set<std::string> listed;
+  for (const auto& cause : r["causes"])
+    if (!cause.contains("superseded_by") && !cause.contains("rejected"))
+      for (const auto& j : cause["joints"]) listed.insert(j.get<std::string>());
+  for (const auto& [j, given] : r["baseline"]["rmse_test"].items()) {
+    const double ratio = r["final"]["rmse_test"][j].get<double>() / given.get<double>();
+    EXPECT_LE(ratio, listed.count(j) ? 2.0 : 1.25) << j << ": named " << joined(named(r));
+  }
+  EXPECT_FALSE(listed.count("roll")) << joined(named(r));
+  // The cable is outside the vocabulary: on the bend joint it leaves structure, said.
+  bool bend = false;
+  for (const auto& u : r["unexplained"]) bend |= u["joint"] == "bend";
+  EXPECT_TRUE(bend) << r["unexplained"].dump();
+}
+
 // A probe over seeds, for the tables of the issue (not run by ctest: --gtest_also_run_disabled_tests).
 // SPML_BEYOND_KIND: a kind of make_draw; SPML_BEYOND_FIRST, SPML_BEYOND_SEEDS: the seeds;
 // SPML_BEYOND_DELAY_MS; SPML_BEYOND_NOISE (torque noise fraction); SPML_BEYOND_BITS;
@@ -1258,7 +1368,7 @@ TEST(DiagnoseBeyond, DISABLED_SeedTable) {
               << r["delay"]["named"] << "; causes " << joined(named(r)) << "\n   delay: " << r["delay"]["why"].get<std::string>() << "\n";
     for (const auto& cause : r["causes"])
       std::cout << "   cause " << cause["effect"] << " " << cause["joints"].dump() << " " << cause.value("params", nlohmann::json()).dump()
-                << (cause.contains("superseded_by") ? " superseded" : "") << (cause.contains("rejected") ? " REJECTED" : "")
+                << (cause.contains("superseded_by") ? " superseded" : "") << (cause.contains("rejected") ? " REJECTED (" + cause["rejected"].value("summary", std::string("in simulation")) + ")" : std::string())
                 << (cause.contains("not_identifiable") ? " not identifiable " + cause["not_identifiable"].dump() : "")
                 << (cause.contains("resolution") ? "\n     resolution: " + cause["resolution"].get<std::string>() : "") << "\n";
     for (const auto& u : r["unexplained"])

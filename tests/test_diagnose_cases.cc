@@ -1187,7 +1187,8 @@ TEST(DiagnoseCases, AHeldOutSplitContinuesTheFitSplitsBristleState) {
 // fresh log names `parameters` (the shoulder's damping), whose re-identified values can be
 // written only in part and then fit no better than the MJCF's own, so extended.xml keeps the
 // MJCF's. report.md had said "extended.xml: 0.7388" for a damping the file kept at 0.4318. A
-// cause extended.xml leaves out is marked rejected, and report.md says no value of it is there.
+// value extended.xml does not hold is said to be the MJCF's there (since stop 53 the damping is
+// written alone, the listed inertia sum not: the held-out guard's first fallback).
 TEST(DiagnoseCases, TheReportStatesOnlyWhatExtendedXmlHolds) {
   SPML_SKIP_UNDER_SANITIZERS();
   const auto dir = test::temp_dir("dc-states");
@@ -1210,10 +1211,14 @@ TEST(DiagnoseCases, TheReportStatesOnlyWhatExtendedXmlHolds) {
   again.rollouts = 0;
   const nlohmann::json r = diagnose(again, (dir / "d2").string()).report;
   ASSERT_EQ(r["causes"][0]["effect"], "parameters") << r["causes"].dump(1);
-  ASSERT_EQ(r["parameters_written"], "none") << "this log no longer tests a `parameters` that extended.xml leaves out";
-  EXPECT_TRUE(r["causes"][0].contains("rejected")) << r["causes"][0].dump(1);
+  // Since stop 53 the held-out guard first writes the listed joint terms alone (here the
+  // shoulder's damping), leaving out the listed inertia sum: report.md says which is not written.
+  ASSERT_EQ(r["parameters_written"], "partial") << "this log no longer tests a `parameters` that extended.xml writes in part";
+  ASSERT_TRUE(r["causes"][0]["written"].contains("listed_only")) << r["causes"][0].dump(1);
   const std::string md = test::read_file((dir / "d2" / "report.md").string());
   EXPECT_EQ(md.find("extended.xml: "), std::string::npos) << md;
+  EXPECT_NE(md.find("(MJCF: 0.3197); not written, extended.xml keeps the MJCF's"), std::string::npos) << md;
+  EXPECT_EQ(md.find("(MJCF: 0.4306); not written"), std::string::npos) << md;
 }
 
 // The confirmation's verdict on one cause, on rollout errors of three joints (mean end errors,

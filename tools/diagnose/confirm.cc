@@ -213,7 +213,11 @@ bool Diagnosis::confirm_in_simulation(const std::string& ext_path, MjcfEdits& ed
           trial.joint_attributes.erase(before.joints[j]);
           std::vector<bool> just(worse.size(), false);
           just[j] = true;
-          if ((dropped = better_without(trial, record, just, is_nearest(just)))) c["rejected_joint_terms"][before.joints[j]] = record;
+          if ((dropped = better_without(trial, record, just, is_nearest(just)))) {
+            c["rejected_joint_terms"][before.joints[j]] = record;
+            // Written as its listed terms alone (write_listed_terms), the joint's may be all of it.
+            if (!writes_parameters(edits)) c["rejected"] = record;
+          }
         }
         if (!dropped && writes_parameters(edits) && (dropped = better_without(without_cause(edits, c), record, own, is_nearest(own))))
           c["rejected"] = record;
@@ -381,9 +385,10 @@ bool Diagnosis::refit_written_effects(const std::string& ext_path, MjcfEdits& ed
   return changed;
 }
 
-// The written model must not predict the held-out split worse than the model as given: then
-// the re-identified parameters go first (the effects fitted again with the MJCF's own), and if
-// that is still worse, every cause: extended.xml is the model as given, and the notes say why.
+// The written model must not predict the held-out split worse than the model as given, over
+// the joints or on any one: then the re-identified parameters are written as the terms they
+// list alone, then not at all (the effects fitted again with the MJCF's own), and if that is
+// still worse, every cause goes: extended.xml is the model as given, and the notes say why.
 bool Diagnosis::guard_held_out(const std::string& ext_path, MjcfEdits& edits, std::vector<std::string>& notes,
                                std::pair<Eigen::VectorXd, Eigen::VectorXd>& written) {
   nlohmann::json& R = result_.report;
@@ -395,22 +400,53 @@ bool Diagnosis::guard_held_out(const std::string& ext_path, MjcfEdits& edits, st
   // written with the other joints' held-out torque 2.5-5 times worse (geometric mean), and
   // cubic damping as the joints' damping with them 1.2-5.9 times worse, on 20 of 60 draws.
   auto per_joint = [&] { return per_output_ratio(test_.b - written.second, test_.y0, test_.b, test_.N); };
-  auto worse = [&] { return (test_.b - written.second).squaredNorm() > given + rss_floor(test_.b) || per_joint() > 1 + 1e-9; };
+  // One joint alone may not become much worse either, whatever the others gain: a weak cable
+  // read as `parameters` wrote the hand's mass 0.25 -> 0.078 kg, and the wrist, which no cause
+  // lists, predicted its held-out torque 6.8 times worse (RMS) inside a geometric mean of 0.5.
+  // The bar is its RMS doubled (sum of squares x4): a held-out split's own scatter moves a
+  // joint's RMS by a few percent; of 550 kept reports of earlier reviews and probes, only that
+  // one moved a joint by more than 1.15 times (and two seed-table damping draws' consistent
+  // fits, 3.1 times, now written as their listed terms: write_listed_terms).
+  auto worst_joint = [&] {
+    const std::vector<double> r = output_ratios(test_.b - written.second, test_.y0, test_.b, test_.N);
+    const size_t o = r.empty() ? 0 : static_cast<size_t>(std::max_element(r.begin(), r.end()) - r.begin());
+    return std::make_pair(o, r.empty() ? 1.0 : r[o]);
+  };
+  constexpr double kOneJointWorse = 4.0;
+  auto worse = [&] {
+    return (test_.b - written.second).squaredNorm() > given + rss_floor(test_.b) || per_joint() > 1 + 1e-9 ||
+           worst_joint().second > kOneJointWorse;
+  };
   if (!worse()) return false;
+  const auto [wj, wr] = worst_joint();
+  const std::string wname = wj < out_joints_.size() ? out_joints_[wj] : "?";
   const std::string why = "the written model predicts the held-out split '" + test_name_ + "' worse (relative error " +
                           fmt((test_.b - written.second).norm() / test_.b.norm(), 8) + ", each joint's sum of squares " +
-                          fmt(per_joint(), 4) + " times its own as given, geometric mean) than the model as given (relative error " +
-                          fmt(std::sqrt(given) / test_.b.norm(), 8) + ")";
-  // Said as it was judged: on the total, or joint by joint (a review read "test error after
+                          fmt(per_joint(), 4) + " times its own as given, geometric mean; " + wname + "'s " + fmt(std::sqrt(wr), 3) +
+                          " times its RMS as given) than the model as given (relative error " + fmt(std::sqrt(given) / test_.b.norm(), 8) + ")";
+  // Said as it was judged: on the total, joint by joint (a review read "test error after
   // 6.25 % REJECTED: held-out error worse" against 12.6 % as given; its joints were 20 and 16
-  // times worse than their own).
+  // times worse than their own), or on one joint.
   const bool in_total = (test_.b - written.second).squaredNorm() > given + rss_floor(test_.b);
-  const nlohmann::json record = {{"reason", why + "; extended.xml leaves it out"},
-                                 {"summary", in_total ? "held-out error worse than the model as given"
-                                                      : "held-out error worse than the model as given joint by joint (each joint's against its own, geometric mean " +
-                                                            fmt(per_joint(), 3) + " times)"}};
+  const bool by_joints = per_joint() > 1 + 1e-9;
+  const nlohmann::json record = {
+      {"reason", why + "; extended.xml leaves it out"},
+      {"summary", in_total    ? "held-out error worse than the model as given"
+                  : by_joints ? "held-out error worse than the model as given joint by joint (each joint's against its own, geometric mean " +
+                                    fmt(per_joint(), 3) + " times)"
+                              : "held-out error on " + wname + " " + fmt(std::sqrt(wr), 3) + " times its own as given (RMS)"}};
   std::vector<std::string> ignored;
   if (parameters_named_ && writes_parameters(edits)) {
+    // First the terms `parameters` lists alone, where it was not written so (write_listed_terms):
+    // a damping error (0.35 for 0.5, seed-table draw 213) written with every body re-identified
+    // beside it left a light joint's held-out torque 3.1 times worse (RMS).
+    if (R["parameters_written"] != "listed" && write_listed_terms(edits, false, why)) {
+      notes.push_back(why + ": extended.xml writes only the terms `parameters` lists, keeps the MJCF's inertials and other terms, "
+                      "and fits the effects again");
+      refit_written_effects(ext_path, edits, notes);
+      written = write_scored(ext_path, edits, ignored);
+      if (!worse()) return true;
+    }
     drop_parameters(edits);
     R["causes"][delay_.named ? 1 : 0]["rejected"] = record;   // `parameters`, after a named `delay`
     R["parameters_written"] = "none";

@@ -279,6 +279,8 @@ std::vector<bool> agreeing_outputs(const std::vector<std::pair<double, double>>&
 // (N rows each) of the residual `after`'s sum of squares relative to `before`'s, each output's
 // sums below the rounding level of its part of b counting as that level; 1 for no outputs.
 double per_output_ratio(const Eigen::VectorXd& after, const Eigen::VectorXd& before, const Eigen::VectorXd& b, Eigen::Index N);
+// Each output's ratio of the geometric mean above, in output order.
+std::vector<double> output_ratios(const Eigen::VectorXd& after, const Eigen::VectorXd& before, const Eigen::VectorXd& b, Eigen::Index N);
 
 // The rounding level of a stacked target b: (1e-8 |b|)^2, far below any measured residual.
 inline double rss_floor(const Eigen::VectorXd& b) { return 1e-16 * b.squaredNorm(); }
@@ -463,6 +465,7 @@ class Diagnosis {
   std::pair<Eigen::VectorXd, Eigen::VectorXd> write_scored(const std::string& ext_path, MjcfEdits& e, std::vector<std::string>& n);
   void choose_partial(const std::string& ext_path, MjcfEdits& edits, std::vector<std::string>& notes,
                       std::pair<Eigen::VectorXd, Eigen::VectorXd>& written);
+  bool write_listed_terms(MjcfEdits& edits, bool every, const std::string& why);
   void restore_superseded(size_t rejected, size_t first, MjcfEdits& edits, std::vector<std::string>& notes);
   bool refit_written_effects(const std::string& ext_path, MjcfEdits& edits, std::vector<std::string>& notes);
   bool guard_held_out(const std::string& ext_path, MjcfEdits& edits, std::vector<std::string>& notes,

@@ -68,6 +68,8 @@ std::string params_text(const nlohmann::json& c, const std::string& sep) {
       if (std::fabs(w - v) > 1e-3 * std::fabs(v)) out += "; extended.xml: " + num(w);
     } else if (rejected_term(it.key())) {
       out += "; rejected, extended.xml keeps the MJCF's";
+    } else if (in_file && c.contains("written") && c["written"].contains("listed_only")) {
+      out += "; not written, extended.xml keeps the MJCF's";   // the listed terms alone (write_listed_terms)
     }
   }
   const nlohmann::json shape = c.value("shape", nlohmann::json::object());
