@@ -330,6 +330,7 @@ class Diagnosis {
   // estimate.cc
   std::vector<const BlockColumns*> blocks(const std::vector<int>& causes, bool base_free) const;
   Fit refit(const std::vector<int>& causes, bool base_free, bool robust = false) const;
+  Fit weighted_free_fit(const std::vector<int>& causes, const Eigen::VectorXd& w) const;
   Eigen::VectorXd residual_on(const SplitData& s, const std::vector<int>& causes, bool base_free, const Fit& f) const;
   double rss_on(const Eigen::VectorXd& r, const std::vector<int>& outputs, Eigen::Index N) const;
   std::vector<int> outputs_of(int candidate) const;
@@ -493,6 +494,7 @@ class Diagnosis {
   std::vector<Cause> causes_;
   bool parameters_named_ = false;
   double parameters_delta_bic_ = 0, parameters_n_eff_ = 0;
+  double parameters_delta_bic_per_joint_ = 0;   // one noise variance per joint (decide_parameters)
   int parameters_contradicted_ = 0;
   int parameters_contradicted_away_ = -1;   // ... of them, by the rows away from velocity reversals (-1: not checked)
   std::vector<bool> parameters_listed_;     // per base parameter: contradicted, there too where checked (`parameters`' list)

@@ -21,6 +21,28 @@ Fit Diagnosis::refit(const std::vector<int>& causes, bool base_free, bool robust
   return fit_blocks(with, t.y, true, robust ? fit_.N : 0);
 }
 
+// The free fit with each output's rows weighted by w (weighted least squares), its residual in
+// the targets' own units: the fit of one noise variance per joint, where the unweighted one
+// leaves a light joint the large joints' misfit.
+Fit Diagnosis::weighted_free_fit(const std::vector<int>& causes, const Eigen::VectorXd& w) const {
+  const TakenBase t = taken_base(causes);
+  std::vector<const BlockColumns*> with = blocks(causes, true);
+  if (t.base) with[0] = &*t.base;
+  std::vector<BlockColumns> scaled;
+  scaled.reserve(with.size());
+  for (const BlockColumns* b : with) {
+    BlockColumns s = *b;
+    for (size_t k = 0; k < s.parts.size(); ++k) s.parts[k] *= w[s.active[k]];
+    scaled.push_back(std::move(s));
+  }
+  std::vector<const BlockColumns*> ptrs;
+  for (const auto& s : scaled) ptrs.push_back(&s);
+  Fit f = fit_blocks(ptrs, scale_outputs(t.y, w, fit_.N), false);
+  f.residual = scale_outputs(f.residual, w.cwiseInverse(), fit_.N);
+  f.rss = f.residual.squaredNorm();
+  return f;
+}
+
 // Residual of a fit on another split (test, cross): the causes' columns evaluated there.
 Eigen::VectorXd Diagnosis::residual_on(const SplitData& s, const std::vector<int>& causes, bool base_free, const Fit& f) const {
   Eigen::VectorXd pred = Eigen::VectorXd::Zero(s.y0.size());

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <iomanip>
+#include <regex>
+#include <set>
 #include <sstream>
 
 namespace spml::diagnose_detail {
@@ -129,6 +131,45 @@ static std::string unit_of(const nlohmann::json& r, const std::string& joint, co
   return " " + r["joint_units"][joint].value(what, "");
 }
 
+// The bodies `parameters`' listed terms name (m:flange, Iyy:hand + ...), beside its joints: a
+// review's payload read "parameters on J1, J2" where the wrist and flange changed most.
+static std::string parameter_bodies_text(const nlohmann::json& c) {
+  std::set<std::string> bodies;
+  const nlohmann::json joints = c.value("joints", nlohmann::json::array());
+  const nlohmann::json params = c.value("params", nlohmann::json::object());   // bound: items() of a temporary outlives it
+  for (const auto& [name, v] : params.items()) {
+    static const std::regex term("[A-Za-z]+:([A-Za-z0-9_.\\-]+)");
+    for (std::sregex_iterator it(name.begin(), name.end(), term), end; it != end; ++it) {
+      const std::string subject = (*it)[1];
+      if (std::find(joints.begin(), joints.end(), subject) == joints.end()) bodies.insert(subject);
+    }
+  }
+  std::string out;
+  for (const auto& b : bodies) out += (out.empty() ? " and bodies " : ", ") + b;
+  return out;
+}
+
+// What extended.xml holds of `parameters` (its `written`): the listed terms alone, or the
+// consistent fit's bodies, those moved beyond two standard errors named with their mass and
+// centre of mass (a review's cable was written as an upper arm of 12.45 kg for 4, which
+// report.md showed only as base-parameter sums).
+static std::string written_parameters_text(const nlohmann::json& w) {
+  if (w.contains("listed_only")) return "   - extended.xml holds the terms above alone, every inertial the MJCF's\n";
+  std::string changed;
+  int bodies = 0;
+  const nlohmann::json all = w.value("bodies", nlohmann::json::object());
+  for (const auto& [name, b] : all.items()) {
+    ++bodies;
+    if (!b.value("changed", false)) continue;
+    changed += std::string(changed.empty() ? "" : "; ") + name + " mass " + num(b["prior_mass"].get<double>()) + " → " + num(b["mass"].get<double>()) +
+               " kg, centre of mass (" + num(b["com"][0].get<double>(), 3) + ", " + num(b["com"][1].get<double>(), 3) + ", " +
+               num(b["com"][2].get<double>(), 3) + ")";
+  }
+  if (bodies == 0) return "";
+  return "   - extended.xml holds " + std::to_string(bodies) + " bodies re-identified (the physically consistent fit)" +
+         (changed.empty() ? ", none moved beyond two standard errors" : "; moved beyond two standard errors: " + changed) + "\n";
+}
+
 std::string report_markdown(const nlohmann::json& r, bool with_plots) {
   std::ostringstream s;
   s << "# spml diagnose\n\n";
@@ -161,6 +202,7 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
     s << ++k << ". **" << c["effect"].get<std::string>() << "**";
     std::string joints;
     for (const auto& j : c["joints"]) joints += (joints.empty() ? "" : ", ") + j.get<std::string>();
+    if (c["effect"] == "parameters") joints += parameter_bodies_text(c);
     s << " on " << joints << " - ΔBIC " << num(c["delta_bic"].get<double>(), 5) << ", test error after "
       << pct(c["rel_error_test_after_all"].get<double>());
     if (c.contains("superseded_by")) s << " (" << superseded_text(c) << ")";
@@ -180,6 +222,7 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
     } else if (c.value("written_as", "") == "plugin") {
       s << "   - in extended.xml as an spml plugin declaration (plain MuJoCo ignores it)\n";
     }
+    if (c["effect"] == "parameters" && c.contains("written") && !c.contains("rejected")) s << written_parameters_text(c["written"]);
     if (c.contains("resolution")) s << "   - " << c["resolution"].get<std::string>() << "\n";
     if (c.contains("not_identifiable") && !c["not_identifiable"].empty() && c["effect"] == "parameters")
       s << "   - not identifiable from this data: " << c["not_identifiable"].size() << " base parameter(s)\n";
@@ -203,6 +246,18 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
     for (const auto& n : r["not_tried"])
       s << "- " << n["effect"].get<std::string>() << (n.contains("joint") ? " on " + n["joint"].get<std::string>() : "") << ": "
         << n["reason"].get<std::string>() << "\n";
+  }
+  if (const auto un = r.value("unexplained", nlohmann::json::array()); !un.empty()) {   // #22
+    s << "\n## Unexplained\n\n";
+    for (const auto& u : un) {
+      if (!u.contains("share")) continue;
+      std::string inputs;
+      for (size_t i = 0; i < u["inputs"].size() && i < 3; ++i) inputs += (inputs.empty() ? "`" : ", `") + u["inputs"][i].get<std::string>() + "`";
+      s << "- " << u["joint"].get<std::string>() << ": a GP over the logged states predicts " << pct(u["share"].get<double>())
+        << " of the residual extended.xml leaves there, held out (RMS " << num(u["rmse_test"].get<double>()) << unit_of(r, u["joint"].get<std::string>(), "torque")
+        << " → " << num(u["rmse_test_with_gp"].get<double>()) << unit_of(r, u["joint"].get<std::string>(), "torque") << "), mostly through " << inputs
+        << ": an effect no cause in the vocabulary holds\n";
+    }
   }
   if (const auto left = r.value("left_unexplained", nlohmann::json::array()); !left.empty()) {   // #22
     s << "\n## Left unexplained\n\n";

@@ -251,7 +251,7 @@ void Diagnosis::build_report(const std::string& out_dir) {
                           {"why", filter_plan_.description}};
   R["statistics"] = {{"standard_errors", "autocorrelation-robust (batch means, Andrews bandwidth)"},
                      {"equations", fit_.y0.size()}, {"parameters_n_eff", parameters_n_eff_},
-                     {"parameters_delta_bic", parameters_delta_bic_}, {"parameters_contradicted", parameters_contradicted_},
+                     {"parameters_delta_bic", parameters_delta_bic_}, {"parameters_delta_bic_per_joint", parameters_delta_bic_per_joint_}, {"parameters_contradicted", parameters_contradicted_},
                      {"parameters_contradicted_away_from_reversals", parameters_contradicted_away_},
                      {"parameters_z", parameters_z_},
                      {"estimator", {{"parameters", parameters_estimator_.empty() ? "ls" : parameters_estimator_}, {"effects", "ls"}}}};

@@ -255,7 +255,9 @@ void Diagnosis::run_rollouts(const std::string& ext_path, const std::string& out
                       " (rollout.worse_on): the causes on those joints are not confirmed in simulation");
     if (!without.empty())
       notes.push_back("rollouts of extended.xml end farther from the measured positions than the model as given on " + without.dump() +
-                      " (rollout.worse_on), where no cause is named: what changed them is the causes of the joints they are coupled to");
+                      " (rollout.worse_on), where no cause is named: what changed them is the causes of the joints they are coupled to, and a right "
+                      "cause does so too (on 8 of 30 seed-table draws of a damping error, written within 1 % of the truth, a coupled joint rolled "
+                      "out 6-34 % worse than with the model as given, as with the true model itself)");
     if (!out_dir.empty())
       csv = rollout_csv(before.joints, rollout_traces(opt_.model, test_.split, opt_.rollouts, opt_.rollout_seconds, test_.runs, traced),
                         rollout_traces(ext_path, test_.split, opt_.rollouts, opt_.rollout_seconds, test_.runs, traced));
