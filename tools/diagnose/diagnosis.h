@@ -281,6 +281,8 @@ std::vector<bool> agreeing_outputs(const std::vector<std::pair<double, double>>&
 double per_output_ratio(const Eigen::VectorXd& after, const Eigen::VectorXd& before, const Eigen::VectorXd& b, Eigen::Index N);
 // Each output's ratio of the geometric mean above, in output order.
 std::vector<double> output_ratios(const Eigen::VectorXd& after, const Eigen::VectorXd& before, const Eigen::VectorXd& b, Eigen::Index N);
+// exp of the mean log (1 for none).
+double geometric_mean(const std::vector<double>& x);
 
 // The rounding level of a stacked target b: (1e-8 |b|)^2, far below any measured residual.
 inline double rss_floor(const Eigen::VectorXd& b) { return 1e-16 * b.squaredNorm(); }
@@ -329,8 +331,7 @@ class Diagnosis {
   double search_shape(Candidate& c, const Fit& current);
   // estimate.cc
   std::vector<const BlockColumns*> blocks(const std::vector<int>& causes, bool base_free) const;
-  Fit refit(const std::vector<int>& causes, bool base_free, bool robust = false) const;
-  Fit weighted_free_fit(const std::vector<int>& causes, const Eigen::VectorXd& w) const;
+  Fit refit(const std::vector<int>& causes, bool base_free, bool robust = false, const Eigen::VectorXd* weights = nullptr) const;
   Eigen::VectorXd residual_on(const SplitData& s, const std::vector<int>& causes, bool base_free, const Fit& f) const;
   double rss_on(const Eigen::VectorXd& r, const std::vector<int>& outputs, Eigen::Index N) const;
   std::vector<int> outputs_of(int candidate) const;

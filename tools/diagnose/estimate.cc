@@ -13,32 +13,26 @@ std::vector<const BlockColumns*> Diagnosis::blocks(const std::vector<int>& cause
 
 // robust: standard errors from the long-run covariance of the residuals (statistics.h).
 // Held at the MJCF's values or free, the base parameters hold none of the own levels the causes
-// take over (own_friction.cc): their force is returned to the targets.
-Fit Diagnosis::refit(const std::vector<int>& causes, bool base_free, bool robust) const {
+// take over (own_friction.cc): their force is returned to the targets. weights: each output's
+// rows weighted so (weighted least squares: the fit of one noise variance per joint, where the
+// unweighted one leaves a light joint the large joints' misfit), the residual returned in the
+// targets' own units.
+Fit Diagnosis::refit(const std::vector<int>& causes, bool base_free, bool robust, const Eigen::VectorXd* weights) const {
   const TakenBase t = taken_base(causes);
   std::vector<const BlockColumns*> with = blocks(causes, base_free);
   if (base_free && t.base) with[0] = &*t.base;   // free, the base parameters still hold no taken level
-  return fit_blocks(with, t.y, true, robust ? fit_.N : 0);
-}
-
-// The free fit with each output's rows weighted by w (weighted least squares), its residual in
-// the targets' own units: the fit of one noise variance per joint, where the unweighted one
-// leaves a light joint the large joints' misfit.
-Fit Diagnosis::weighted_free_fit(const std::vector<int>& causes, const Eigen::VectorXd& w) const {
-  const TakenBase t = taken_base(causes);
-  std::vector<const BlockColumns*> with = blocks(causes, true);
-  if (t.base) with[0] = &*t.base;
+  if (!weights) return fit_blocks(with, t.y, true, robust ? fit_.N : 0);
   std::vector<BlockColumns> scaled;
   scaled.reserve(with.size());
   for (const BlockColumns* b : with) {
     BlockColumns s = *b;
-    for (size_t k = 0; k < s.parts.size(); ++k) s.parts[k] *= w[s.active[k]];
+    for (size_t k = 0; k < s.parts.size(); ++k) s.parts[k] *= (*weights)[s.active[k]];
     scaled.push_back(std::move(s));
   }
   std::vector<const BlockColumns*> ptrs;
   for (const auto& s : scaled) ptrs.push_back(&s);
-  Fit f = fit_blocks(ptrs, scale_outputs(t.y, w, fit_.N), false);
-  f.residual = scale_outputs(f.residual, w.cwiseInverse(), fit_.N);
+  Fit f = fit_blocks(ptrs, scale_outputs(t.y, *weights, fit_.N), false, robust ? fit_.N : 0);
+  f.residual = scale_outputs(f.residual, weights->cwiseInverse(), fit_.N);
   f.rss = f.residual.squaredNorm();
   return f;
 }

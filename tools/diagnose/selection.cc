@@ -31,11 +31,14 @@ std::vector<double> output_ratios(const Eigen::VectorXd& after, const Eigen::Vec
   return out;
 }
 
+double geometric_mean(const std::vector<double>& x) {
+  double log_sum = 0;
+  for (double v : x) log_sum += std::log(v);
+  return x.empty() ? 1.0 : std::exp(log_sum / static_cast<double>(x.size()));
+}
+
 double per_output_ratio(const Eigen::VectorXd& after, const Eigen::VectorXd& before, const Eigen::VectorXd& b, Eigen::Index N) {
-  const std::vector<double> ratios = output_ratios(after, before, b, N);
-  double log_ratio = 0;
-  for (double r : ratios) log_ratio += std::log(r);
-  return ratios.empty() ? 1.0 : std::exp(log_ratio / static_cast<double>(ratios.size()));
+  return geometric_mean(output_ratios(after, before, b, N));
 }
 
 std::vector<int> Diagnosis::kept_effects() const {
@@ -400,7 +403,7 @@ void Diagnosis::decide_parameters() {
   // with an MJCF frictionloss, simulated by MuJoCo as a soft constraint, read +178 on its last
   // joint's sum 1.67 times the free fit's, and named damping 9.80 for 10 on its own data.
   const double one_variance = delta_bic(parameters_n_eff_, fixed.rss, free.rss, free.rank - fixed.rank, rss_floor(fit_.b));
-  const Fit weighted = weighted_free_fit(effects, written_weights_);
+  const Fit weighted = refit(effects, true, false, &written_weights_);
   const std::vector<double> ratio = output_ratios(fixed.residual, weighted.residual, fit_.b, fit_.N);
   double log_likelihood = 0, n_all = 0, largest = 1;
   for (size_t o = 0; o < ratio.size(); ++o) {
