@@ -8,6 +8,14 @@
 #include "spml/parse.h"
 
 namespace spml {
+
+std::optional<JointAttributeTerm> joint_attribute_term(const std::string& name) {
+  const auto colon = name.find(':');
+  if (colon == std::string::npos) return std::nullopt;
+  const std::string kind = name.substr(0, colon);
+  if (kind != "armature" && kind != "damping" && kind != "coulomb" && kind != "stiffness") return std::nullopt;
+  return JointAttributeTerm{name.substr(colon + 1), kind == "coulomb" ? "frictionloss" : kind};
+}
 namespace {
 
 // Newton-Euler wrench of one body, in its frame, as a 6 x 10 matrix acting on

@@ -1427,6 +1427,20 @@ TEST(DiagnoseStatistics, TheFamilywiseBarKeepsTheFamilysFalseAlarmRate) {
   EXPECT_NEAR(spml::diagnose_detail::familywise_z(alpha, 22), 3.840, 5e-4);   // the random chains' rank
 }
 
+// The summary's pooled error weighs joints by their torque: a twenty-first review's light roll
+// joint was 13.4 % off (37 times its noise) behind "relative error on test 0.198 %". The
+// summary names the joint farthest off relative to its own torque beside it.
+TEST(DiagnoseCases, TheSummaryNamesTheJointFarthestOff) {
+  const nlohmann::json errors = {{"rmse_test", {{"shoulder", 0.05}, {"roll", 0.008}}},
+                                 {"rel_error_test", {{"shoulder", 0.0019}, {"roll", 0.134}}}, {"rel_error_test_all", 0.00198}};
+  const nlohmann::json r = {{"model", "m.xml"}, {"data", "d.h5"}, {"fit_split", "train"}, {"test_split", "test"},
+                            {"rows", {{"fit", 10}, {"test", 5}}}, {"joints", {"shoulder", "roll"}}, {"baseline", errors},
+                            {"final", errors}, {"causes", nlohmann::json::array()}, {"not_tried", nlohmann::json::array()},
+                            {"not_identifiable", nlohmann::json::array()}, {"notes", nlohmann::json::array()}};
+  const std::string text = spml::diagnose_detail::report_summary(r);
+  EXPECT_NE(text.find("relative error on test 0.198 % (worst joint roll: 13.4 % of its own)"), std::string::npos) << text;
+}
+
 // A cause no single later one holds is `superseded_by: "redundant"` in report.json; the
 // terminal and report.md printed "superseded by redundant", which a review read as an effect
 // of that name (a LuGre fit on a fresh log). They say it in words; a cause superseded by a

@@ -58,11 +58,10 @@ Layout make_layout(const MjcfRegressor& reg, const Eigen::VectorXd& norms, std::
   }
   for (int k = 10 * nb; k < p; ++k) {
     const std::string& name = reg.param_names()[static_cast<size_t>(k)];
-    const std::string kind = name.substr(0, name.find(':'));
     term_fitted.push_back(norms[k] > 0);
     if (!term_fitted.back()) continue;
     L.terms.push_back(k);
-    L.bounded.push_back(kind == "armature" || kind == "damping" || kind == "coulomb" || kind == "stiffness");
+    L.bounded.push_back(joint_attribute_term(name).has_value());
   }
   for (auto k = static_cast<int>(p); k < norms.size(); ++k)
     if (norms[k] > 0) {

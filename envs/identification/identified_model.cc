@@ -41,9 +41,9 @@ MjcfEdits identified_model_edits(const MjcfRegressor& reg, const ConsistentIdent
     if (!t.fitted) continue;
     const auto colon = t.name.find(':');
     const std::string kind = t.name.substr(0, colon), what = t.name.substr(colon + 1);
-    const bool joint_attr = kind == "armature" || kind == "damping" || kind == "coulomb" || kind == "stiffness";
-    if (joint_attr && mj_name2id(reg.model(), mjOBJ_JOINT, what.c_str()) >= 0)
-      edits.joint_attributes[what][kind == "coulomb" ? "frictionloss" : kind] = t.value;
+    const auto attr = joint_attribute_term(t.name);
+    if (attr && mj_name2id(reg.model(), mjOBJ_JOINT, attr->joint.c_str()) >= 0)
+      edits.joint_attributes[attr->joint][attr->attribute] = t.value;
     else if (t.value != t.prior && !(kind == "plugin" && plugin_parameter(what, t.value)))
       notes.push_back(t.name + " = " + std::to_string(t.value) + " (model: " + std::to_string(t.prior) +
                       ") has no MJCF attribute written here: edit it by hand");

@@ -6,6 +6,7 @@
 
 #include "diagnosis.h"
 #include "rollout.h"
+#include "spml/envs/mjcf_regressor.h"
 #include "spml/matrix_file.h"
 
 namespace spml::diagnose_detail {
@@ -82,7 +83,7 @@ void Diagnosis::choose_partial(const std::string& ext_path, MjcfEdits& edits, st
 }
 
 // `parameters` written as the terms it lists alone, each its joint's own attribute (armature,
-// damping, a Coulomb level as frictionloss) at the estimate that named it, the MJCF's
+// damping, stiffness, a Coulomb level as frictionloss: joint_attribute_term) at the estimate that named it, the MJCF's
 // inertials and other terms kept: where `every` listed term is one (parameters_written
 // "listed"), or, for the held-out guard, where any is (`why`: the guard's reason; "partial"
 // where a listed combination of parameters is then not written). The
@@ -100,14 +101,12 @@ bool Diagnosis::write_listed_terms(MjcfEdits& edits, bool every, const std::stri
   nlohmann::json terms = nlohmann::json::object();
   bool all = true;
   for (const auto& [name, value] : pc["params"].items()) {
-    const auto colon = name.find(':');
-    const std::string kind = name.substr(0, colon), joint = colon == std::string::npos ? "" : name.substr(colon + 1);
-    const bool attribute = (kind == "armature" || kind == "damping" || kind == "coulomb") &&
-                           std::find(out_joints_.begin(), out_joints_.end(), joint) != out_joints_.end();
+    const auto attr = joint_attribute_term(name);
+    const bool attribute = attr && std::find(out_joints_.begin(), out_joints_.end(), attr->joint) != out_joints_.end();
     if (!attribute && every) return false;
     all = all && attribute;
-    if (!attribute || rejected.contains(joint)) continue;   // (a joint's terms rejected in simulation stay the MJCF's)
-    listed.joint_attributes[joint][kind == "coulomb" ? "frictionloss" : kind] = value.get<double>();
+    if (!attribute || rejected.contains(attr->joint)) continue;   // (a joint's terms rejected in simulation stay the MJCF's)
+    listed.joint_attributes[attr->joint][attr->attribute] = value.get<double>();
     terms[name] = {{"value", value}, {"prior", pc["prior"].value(name, 0.0)}, {"std_error", pc["stderr"].value(name, 0.0)}};
   }
   if (!writes_parameters(listed)) return false;

@@ -10,6 +10,7 @@
 #pragma once
 
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -28,6 +29,16 @@ struct RegressorOptions {
   // uses this so that dry friction the model leaves out is named as an effect, not a parameter.
   bool coulomb_only_where_modelled = false;
 };
+
+// The joint attribute a standard parameter sets: "damping:J2" -> {"J2", "damping"}, likewise
+// armature and stiffness; a Coulomb level ("coulomb:J2") is MuJoCo's frictionloss. Empty for
+// any other name (inertials, plugin parameters, base combinations). Whether the joint exists
+// is the caller's to check. (These are the terms an identification keeps non-negative and
+// writes as MJCF joint attributes.)
+struct JointAttributeTerm {
+  std::string joint, attribute;
+};
+std::optional<JointAttributeTerm> joint_attribute_term(const std::string& name);
 
 // A joint where the regressor times the model's own values (plugins' included) differs from
 // MuJoCo's inverse dynamics of the model (envs/regressor_check.cc).
