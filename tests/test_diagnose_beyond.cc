@@ -62,6 +62,7 @@ struct Measurement {
   int decimate = 5;       // the import's decimation (1: the log kept at 1 kHz; SPML_BEYOND_DECIMATE)
   double duration = 10;   // seconds logged (SPML_BEYOND_DURATION)
   double f_high = 0;   // the excitation's top frequency [Hz] (0: the default band, 0.1-1 Hz; its bottom stays 0.1 Hz)
+  std::string reference;   // a CSV of q:<joint> against t the controller tracks instead (ExcitationOptions "file:")
   // A torque outside the plugin vocabulary, added to the logged torque of joint `extra_joint`
   // as a function of its true position and velocity: a robot with that force needs exactly
   // this much more torque along the motion it made (inverse dynamics is additive).
@@ -81,6 +82,7 @@ std::string measured(const Case& c, const std::string& path, unsigned seed, cons
   o.seed = seed;
   o.excitation.seed = seed + 17;
   if (m.f_high > 0) o.excitation.f_high = m.f_high, o.excitation.f_low = std::min(o.excitation.f_low, 0.5 * m.f_high);
+  if (!m.reference.empty()) o.excitation.kind = "file:" + m.reference;
   MeasuredRun run = simulate_measured(c.truth, o);
   if (m.extra && m.extra_joint >= 0)
     for (Eigen::Index i = 0; i < run.tau.rows(); ++i)   // no jitter: sample i is tick i
@@ -257,8 +259,9 @@ namespace {
 // "lugre" (LuGre friction of random levels on a random joint), "lugre_delay" (both: the
 // torque log late and LuGre, whose lag the delay search's static nuisance does not hold),
 // "cubic" (cubic damping of 20 % of the joint's RMS torque), "stop" (a one-sided end stop over
-// the top fifth of the joint's stroke, 0.6 of its RMS torque at the far end): the last two are
-// outside the vocabulary.
+// the top fifth of the joint's stroke, 0.6 of its RMS torque at the far end), "sine" (a torque
+// a sin(2 (q - q_mid)) of its position, a fifth of its RMS torque: near its middle a spring):
+// the last three are outside the vocabulary.
 struct Draw {
   Case c;
   Measurement m;
@@ -293,7 +296,7 @@ Draw make_draw(const std::filesystem::path& dir, const std::string& kind, int s,
       decl = "type=stick_slip joints=JOINT fc=" + test::num(d.fc) + " fs=" + test::num(d.fs) + " vs=" + test::num(d.vs) + " sigma0=" +
              test::num(sigma0) + " sigma1=" + test::num(0.05 * std::sqrt(sigma0)) + " sigma2=0";
   }
-  if (kind == "cubic" || kind == "stop") {
+  if (kind == "cubic" || kind == "stop" || kind == "sine") {
     MeasurementOptions probe;   // the same excitation as the draw's (measured() seeds it alike)
     probe.duration = m.duration;
     probe.torque_noise = 0;
@@ -305,6 +308,10 @@ Draw make_draw(const std::filesystem::path& dir, const std::string& kind, int s,
       const double cc = 0.2 * rms / std::sqrt(v.array().pow(6).mean());
       m.extra = [cc](double, double qd) { return cc * qd * qd * qd; };
       d.what += " c=" + test::num(cc);
+    } else if (kind == "sine") {
+      const double mid = 0.5 * (q.maxCoeff() + q.minCoeff()), a = 0.2 * std::sqrt(2.0) * rms;
+      m.extra = [mid, a](double qq, double) { return a * std::sin(2 * (qq - mid)); };
+      d.what += " a=" + test::num(a) + " mid=" + test::num(mid) + " stroke=" + test::num(q.maxCoeff() - q.minCoeff());
     } else {
       std::vector<double> sorted(q.data(), q.data() + q.size());
       std::sort(sorted.begin(), sorted.end());
@@ -1377,6 +1384,96 @@ TEST(DiagnoseBeyond, ATendonTheVocabularyTakesMostOfIsMarkedNearest) {
     EXPECT_LT(r["final"]["rmse_test"][j].get<double>(), 0.5 * r["baseline"]["rmse_test"][j].get<double>()) << j;
 }
 
+// A torque of the position outside the vocabulary, a sin(2 (q - q_mid)), which a spring takes
+// most of near the middle of the stroke (a twenty-first review's 1.2 sin(2 q) on its base
+// joint): the spring is named, and what it leaves (about a tenth) is predicted through q: by
+// the GP, but at 4-5 times its white noise, under `unexplained`'s noise margin - written as a
+// physical spring, said nowhere. Structure through the positions alone is not the measurement
+// chain's (at most 0.21 of a clean joint's residual): now the joint is `unexplained` through
+// its own position and the spring is marked `nearest_candidate`; no cause rolls out worse.
+TEST(DiagnoseBeyond, APositionTorqueASpringTakesMostOfIsUnexplainedThroughItsPosition) {
+  const auto dir = test::temp_dir("sine");
+  for (const int s : {203, 207}) {
+    const Draw d = make_draw(dir, "sine", s, 0, issue_case_size());
+    const auto r = run_draw(dir, d, s, 20);
+    const std::string joint = "j" + std::to_string(d.joint);
+    std::cout << d.what << " on " << joint << ": named " << joined(named(r)) << "\n  unexplained " << r["unexplained"].dump() << "\n";
+    bool found = false;
+    for (const auto& u : r["unexplained"])
+      if (u["joint"] == joint) {
+        found = true;
+        EXPECT_EQ(u["inputs"][0], "q:" + joint);
+        EXPECT_GE(u["share_through_positions"].get<double>(), 0.4);
+      }
+    EXPECT_TRUE(found) << r["unexplained"].dump();
+    EXPECT_TRUE(r["rollout"]["worse_on"].empty()) << r["rollout"].dump();
+    for (const auto& cause : r["causes"]) {
+      if (cause.contains("superseded_by") || cause.contains("rejected") || cause["effect"] == "delay") continue;
+      EXPECT_TRUE(cause.contains("nearest_candidate")) << cause.dump();
+    }
+    EXPECT_LT(r["final"]["rmse_test"][joint].get<double>(), 0.2 * r["baseline"]["rmse_test"][joint].get<double>());
+  }
+}
+
+// A joint limit the motion reaches briefly (MuJoCo's own, in the true model; the model as given
+// has none): its force lies in the few percent of rows past it, too few and too steep for the
+// GP, and a twenty-first review's limits reached in 3 and 7 % of the rows were `left_unexplained`
+// with "a load, a command, a temperature" said first. The residual's energy is now located at
+// that end of the joint's travel, on its position.
+TEST(DiagnoseBeyond, AJointLimitReachedBrieflyIsSaidToLieAtAnEnd) {
+  const auto dir = test::temp_dir("limit");
+  const std::string arm = filled(kArm5, "ARMATURE", "0.002");
+  Case c;
+  c.joints = 5;
+  c.user = (dir / "given.xml").string();
+  c.truth = (dir / "limit.xml").string();
+  std::ofstream(c.user) << arm;
+  Measurement m = issue_case_size();
+  // The motion of the model as given is the reference the limited robot tracks: an excitation
+  // planned for the limited model would stay within its range.
+  MeasurementOptions probe;
+  probe.duration = m.duration;
+  probe.torque_noise = 0;
+  probe.seed = 11;
+  probe.excitation.seed = 11 + 17;
+  const MeasuredRun free = simulate_measured(c.user, probe);
+  m.reference = (dir / "reference.csv").string();
+  {
+    std::ofstream ref(m.reference);
+    ref.precision(12);
+    ref << "t";
+    for (const auto& j : free.joints) ref << ",q:" << j;
+    ref << "\n";
+    for (Eigen::Index i = 0; i < free.tick_qpos.rows(); ++i) {
+      ref << static_cast<double>(i) / 1000;
+      for (Eigen::Index k = 0; k < free.tick_qpos.cols(); ++k) ref << "," << free.tick_qpos(i, k);
+      ref << "\n";
+    }
+  }
+  const Eigen::VectorXd q = free.tick_qpos.col(2);
+  std::vector<double> sorted(q.data(), q.data() + q.size());
+  std::sort(sorted.begin(), sorted.end());
+  const double low = sorted[sorted.size() / 20];   // past it 5 % of the time
+  const std::string elbow = R"(<joint name="J3" type="hinge" axis="0 1 0")";
+  std::ofstream(c.truth) << filled(arm, elbow, elbow + R"( limited="true" range=")" + test::num(low) + R"( 10")");
+  const auto r = diagnose_case(c, measured(c, (dir / "limit.h5").string(), 11, m), 20);
+  std::cout << "limit at " << low << ": named " << joined(named(r)) << "\n";
+  // Said on the elbow, in `unexplained` (the GP predicts part of it) or `left_unexplained`, and
+  // only there.
+  int said = 0;
+  for (const auto& list : {r["unexplained"], r["left_unexplained"]})
+    for (const auto& e : list) {
+      EXPECT_EQ(e["joint"], "J3") << e.dump();
+      if (e["joint"] != "J3" || !e.contains("at_an_end")) continue;
+      ++said;
+      EXPECT_EQ(e["at_an_end"]["input"], "q:J3");
+      EXPECT_EQ(e["at_an_end"]["end"], "lower");
+      EXPECT_NEAR(e["at_an_end"]["beyond"].get<double>(), low, 0.05);
+      EXPECT_GE(e["at_an_end"]["energy"].get<double>(), 0.5);
+    }
+  EXPECT_EQ(said, 1) << r["left_unexplained"].dump() << r["unexplained"].dump();
+}
+
 // The held-out gain of `parameters` per joint is judged with the free fit weighted by the
 // joints' noise too. A twentieth review's 6-joint arm (a slide among its hinges; its last joint
 // 1/830 of the base's torque) with that joint's damping twice the MJCF's: the evidence passed
@@ -1532,7 +1629,8 @@ TEST(DiagnoseBeyond, DISABLED_SeedTable) {
                 << (cause.contains("resolution") ? "\n     resolution: " + cause["resolution"].get<std::string>() : "") << "\n";
     for (const auto& u : r["unexplained"])
       std::cout << "   unexplained " << u["joint"] << " top " << u["inputs"][0] << " share " << u["share"] << " explained_rmse "
-                << std::sqrt(std::pow(u["rmse_test"].get<double>(), 2) - std::pow(u["rmse_test_with_gp"].get<double>(), 2)) << " noise_rmse " << u["noise_rmse"] << "\n";
+                << std::sqrt(std::pow(u["rmse_test"].get<double>(), 2) - std::pow(u["rmse_test_with_gp"].get<double>(), 2)) << " noise_rmse " << u["noise_rmse"]
+                << (u.contains("at_an_end") ? " AT_AN_END " + u["at_an_end"].dump() : "") << "\n";
     for (const auto& t : r["not_tried"])
       if (t.value("joint", "") == "j" + std::to_string(d.joint) && t.value("effect", "") == "stick_slip")
         std::cout << "   not tried " << t["reason"] << (t.contains("resolution") ? "\n     resolution: " + t["resolution"].get<std::string>() : "") << "\n";

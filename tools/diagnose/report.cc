@@ -84,6 +84,15 @@ std::string params_text(const nlohmann::json& c, const std::string& sep) {
 // in the third digit and says nothing).
 bool delay_named(const nlohmann::json& r) { return r.contains("delay") && r["delay"].value("named", false); }
 
+// "95 % of its residual's energy lies in the tenth of the rows at the upper end of its travel
+// (q:J >= 1.93)": left_unexplained's `at_an_end`.
+std::string at_an_end_text(const nlohmann::json& e) {
+  const bool upper = e["end"] == "upper";
+  return pct(e["energy"].get<double>()) + " of its residual's energy lies in the " + pct(e["rows"].get<double>()) + " of the rows at the " +
+         (upper ? "upper" : "lower") + " end of its travel (" + e["input"].get<std::string>() + (upper ? " >= " : " <= ") +
+         num(e["beyond"].get<double>(), 4) + ")";
+}
+
 // ", roll 13.4 % of its own": the joint farthest off relative to its own torque, where there
 // are several. The pooled error weighs joints by their torque: a review's light wrist roll was
 // 13.4 % off, 37 times its noise, behind a pooled 0.198 %.
@@ -131,10 +140,12 @@ std::string report_summary(const nlohmann::json& r) {
   for (const auto& u : r.value("unexplained", nlohmann::json::array()))   // #22
     if (u.contains("share"))
       s << "  unexplained on " << u["joint"].get<std::string>() << ": a GP on the residual explains " << pct(u["share"].get<double>())
-        << " of it held out, mostly through " << u["inputs"][0].get<std::string>() << "\n";
+        << " of it held out, mostly through " << u["inputs"][0].get<std::string>()
+        << (u.contains("at_an_end") ? "; " + at_an_end_text(u["at_an_end"]) : std::string()) << "\n";
   for (const auto& l : r.value("left_unexplained", nlohmann::json::array()))   // #22
     s << "  left on " << l["joint"].get<std::string>() << ": " << pct(l["rel_error_test"].get<double>())
-      << " of its held-out torque, held by no cause in extended.xml and not predicted from the logged states enough to be `unexplained`\n";
+      << " of its held-out torque, held by no cause in extended.xml and not predicted from the logged states enough to be `unexplained`"
+      << (l.contains("at_an_end") ? "; " + at_an_end_text(l["at_an_end"]) : std::string()) << "\n";
   return s.str();
 }
 
@@ -269,17 +280,24 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
       s << "- " << u["joint"].get<std::string>() << ": a GP over the logged states predicts " << pct(u["share"].get<double>())
         << " of the residual extended.xml leaves there, held out (RMS " << num(u["rmse_test"].get<double>()) << unit_of(r, u["joint"].get<std::string>(), "torque")
         << " → " << num(u["rmse_test_with_gp"].get<double>()) << unit_of(r, u["joint"].get<std::string>(), "torque") << "), mostly through " << inputs
-        << ": an effect no cause in the vocabulary holds\n";
+        << ": an effect no cause in the vocabulary holds"
+        << (u.contains("at_an_end") ? "; " + at_an_end_text(u["at_an_end"]) + ": a stop, a limit or a contact there?" : std::string()) << "\n";
     }
   }
   if (const auto left = r.value("left_unexplained", nlohmann::json::array()); !left.empty()) {   // #22
     s << "\n## Left unexplained\n\n";
-    for (const auto& l : left)
+    for (const auto& l : left) {
       s << "- " << l["joint"].get<std::string>() << ": extended.xml leaves " << pct(l["rel_error_test"].get<double>())
         << " of its held-out torque; no cause in it holds that, and a GP over the logged states does not predict enough of it to report it "
-           "as `unexplained`: what is missing depends on something the log does not hold (a load, a command, a temperature), or on the "
-           "states too steeply for the GP's rows (a rigid stop or contact, whose force changes over a few encoder counts), or, on a joint "
-           "whose torque is small against its noise, it is noise\n";
+           "as `unexplained`: ";
+      if (l.contains("at_an_end"))
+        s << at_an_end_text(l["at_an_end"]) << ": a stop, a limit or a contact there, whose force changes over a few encoder counts, too "
+             "steeply and in too few rows for the GP\n";
+      else
+        s << "what is missing depends on something the log does not hold (a load, a command, a temperature), or on the "
+             "states too steeply for the GP's rows (a rigid stop or contact, whose force changes over a few encoder counts), or, on a "
+             "joint whose torque is small against its noise, it is noise\n";
+    }
   }
   if (!r["notes"].empty()) {
     s << "\n## Notes\n\n";

@@ -305,7 +305,7 @@ void Diagnosis::build_report(const std::string& out_dir) {
   // rejected had its unexplained rmse_test read 0.725 where extended.xml leaves 2.08.
   R["unexplained"] = unexplained(out_dir, fit_.b - written.first, test_.b - written.second);
   mark_nearest_candidates(R, test_.b - written.second);
-  R["left_unexplained"] = left_unexplained(R);
+  R["left_unexplained"] = left_unexplained(R, test_.b - written.second);
   write_series(out_dir, written.first, written.second);
   result_.timings.outputs += since(t0);
 }
