@@ -281,7 +281,8 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
         << " of the residual extended.xml leaves there, held out (RMS " << num(u["rmse_test"].get<double>()) << unit_of(r, u["joint"].get<std::string>(), "torque")
         << " → " << num(u["rmse_test_with_gp"].get<double>()) << unit_of(r, u["joint"].get<std::string>(), "torque") << "), mostly through " << inputs
         << ": an effect no cause in the vocabulary holds"
-        << (u.contains("at_an_end") ? "; " + at_an_end_text(u["at_an_end"]) + ": a stop, a limit or a contact there?" : std::string()) << "\n";
+        << (u.contains("at_an_end") ? "; " + at_an_end_text(u["at_an_end"]) + ": a stop, a limit or a contact there, or a reversal too sharp "
+                                      "for the import's low-pass?" : std::string()) << "\n";
     }
   }
   if (const auto left = r.value("left_unexplained", nlohmann::json::array()); !left.empty()) {   // #22
@@ -291,8 +292,9 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
         << " of its held-out torque; no cause in it holds that, and a GP over the logged states does not predict enough of it to report it "
            "as `unexplained`: ";
       if (l.contains("at_an_end"))
-        s << at_an_end_text(l["at_an_end"]) << ": a stop, a limit or a contact there, whose force changes over a few encoder counts, too "
-             "steeply and in too few rows for the GP\n";
+        s << at_an_end_text(l["at_an_end"]) << ": a stop, a limit or a contact there (whose force changes over a few encoder counts, too "
+             "steeply and in too few rows for the GP), or something only that end of the motion holds, such as a reversal too sharp for the "
+             "import's low-pass\n";
       else
         s << "what is missing depends on something the log does not hold (a load, a command, a temperature), or on the "
              "states too steeply for the GP's rows (a rigid stop or contact, whose force changes over a few encoder counts), or, on a "

@@ -143,7 +143,7 @@ struct JointGp {
   Eigen::MatrixXd Xt;             // the held-out rows, standardized
   std::vector<Eigen::Index> tr;   // their rows in the test split
   double noise_rmse = 0, explained_rmse = 0;
-  double position_share = 0;      // the held-out share the GP predicts through the q: inputs alone
+  double position_share = 0;      // the held-out share the GP predicts through the q: inputs alone (< 0: worse than none; reported as 0)
   // `unexplained`'s tests: a real share, and what it predicts well above the noise it leaves;
   // or structure through the positions.
   bool structured() const {
@@ -246,7 +246,7 @@ nlohmann::json Diagnosis::unexplained_joint(size_t o, const Eigen::VectorXd& r_f
   const double n = static_cast<double>(tr.size());
   return {{"joint", out_joints_[o]}, {"inputs", inputs}, {"relevance", relevance}, {"ard_relevance", ard_rel}, {"share", share},
           {"rmse_test", scale * std::sqrt(g->m0 / n)}, {"rmse_test_with_gp", scale * std::sqrt(g->m1 / n)},
-          {"noise_rmse", noise_rmse}, {"share_through_positions", j.position_share}};
+          {"noise_rmse", noise_rmse}, {"share_through_positions", std::max(0.0, j.position_share)}};
 }
 
 // Every joint with a fit residual: report.json's `unexplained`, and unexplained.csv.
