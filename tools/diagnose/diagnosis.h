@@ -40,6 +40,7 @@
 #include "design.h"
 #include "spml/envs/mjcf_edit.h"
 #include "filtering.h"
+#include "report.h"
 #include "spml/diagnose.h"
 #include "spml/envs/consistent_identification.h"
 #include "spml/envs/mjcf_regressor.h"
@@ -257,11 +258,6 @@ nlohmann::json rejected_causes(const nlohmann::json& causes);
 // the names differ.
 Split in_column_order(const Split& s, const std::vector<std::string>& order, const std::string& file);
 
-// The subjects (joint or body names) of the terms of a base parameter's name, e.g.
-// "armature:joint1 + 0.5*Izz:link1" -> joint1, link1: exact names, so joint1 is not joint10.
-std::vector<std::string> term_subjects(const std::string& base_name);
-// Its terms as standard parameter names, their factors dropped ("damping:joint1", "Izz:link1").
-std::vector<std::string> term_names(const std::string& base_name);
 
 // Evidence for the larger of two nested fits (Bayesian information criterion, n equations -
 // the effective number where residuals are autocorrelated - dk more parameters): positive when

@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <cmath>
 #include <iomanip>
-#include <regex>
 #include <set>
 #include <sstream>
 
@@ -161,13 +160,9 @@ static std::string parameter_bodies_text(const nlohmann::json& c) {
   std::set<std::string> bodies;
   const nlohmann::json joints = c.value("joints", nlohmann::json::array());
   const nlohmann::json params = c.value("params", nlohmann::json::object());   // bound: items() of a temporary outlives it
-  for (const auto& [name, v] : params.items()) {
-    static const std::regex term("[A-Za-z]+:([A-Za-z0-9_.\\-]+)");
-    for (std::sregex_iterator it(name.begin(), name.end(), term), end; it != end; ++it) {
-      const std::string subject = (*it)[1];
+  for (const auto& [name, v] : params.items())
+    for (const auto& subject : term_subjects(name))
       if (std::find(joints.begin(), joints.end(), subject) == joints.end()) bodies.insert(subject);
-    }
-  }
   std::string out;
   for (const auto& b : bodies) out += (out.empty() ? " and bodies " : ", ") + b;
   return out;

@@ -3,11 +3,18 @@
 
 #include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
 namespace spml::diagnose_detail {
 
 std::string report_summary(const nlohmann::json& report);    // a few lines for the terminal
 // report.md; with_plots: link plots/residuals.png and plots/states.png
 std::string report_markdown(const nlohmann::json& report, bool with_plots = true);
+
+// The subjects (joint or body names) of the terms of a base parameter's name, e.g.
+// "armature:joint1 + 0.5*Izz:link1" -> joint1, link1: exact names, so joint1 is not joint10.
+std::vector<std::string> term_subjects(const std::string& base_name);
+// Its terms as standard parameter names, their factors dropped ("damping:joint1", "Izz:link1").
+std::vector<std::string> term_names(const std::string& base_name);
 
 }  // namespace spml::diagnose_detail
