@@ -228,21 +228,23 @@ Fit fit_blocks(const std::vector<const BlockColumns*>& blocks, const Eigen::Vect
   // covariance S of the rows q_i r_i, R11^-1 S R11^-T (sandwich), scaled by n / (n - rank).
   // The determined columns are F1 = Q R11, so q_i = R11^-T f_i: S from the rows f_i r_i,
   // mapped through R11^-1 (no basis needed).
-  Eigen::VectorXd var_z(rank);
+  const Eigen::MatrixXd RR = Rinv * Rinv.transpose();
+  Eigen::MatrixXd V_z;
   if (hac_rows_per_output > 0) {
     Eigen::MatrixXd Z(F.rows(), rank);
     for (int i = 0; i < rank; ++i) Z.col(i) = F.col(perm[i]).cwiseProduct(fit.residual);
-    const Eigen::MatrixXd RR = Rinv * Rinv.transpose();
-    const Eigen::MatrixXd V = RR * long_run_covariance(Z, fit.residual, hac_rows_per_output) * RR;
-    var_z = V.diagonal() * (static_cast<double>(y.size()) / dof);
+    V_z = RR * long_run_covariance(Z, fit.residual, hac_rows_per_output) * RR * (static_cast<double>(y.size()) / dof);
+    fit.robust = true;
   } else {
-    for (int i = 0; i < rank; ++i) var_z[i] = sigma2 * Rinv.row(i).squaredNorm();
+    V_z = sigma2 * RR;
   }
+  fit.cov = Eigen::MatrixXd::Zero(cols, cols);
   for (int i = 0; i < rank; ++i) {
     const int k = perm[i];
     fit.coef[k] = z[i] / scale[k];
-    fit.stderr_[k] = std::sqrt(std::max(var_z[i], 0.0)) / scale[k];
+    fit.stderr_[k] = std::sqrt(std::max(V_z(i, i), 0.0)) / scale[k];
     fit.determined[static_cast<size_t>(k)] = true;
+    for (int j = 0; j < rank; ++j) fit.cov(k, perm[j]) = V_z(i, j) / (scale[k] * scale[perm[j]]);
   }
   if (want_basis) fit.factors = std::move(fac);
   return fit;
@@ -315,16 +317,24 @@ Fit iv_fit_blocks(const std::vector<const BlockColumns*>& blocks, const std::vec
                                                   (static_cast<double>(y.size()) / dof))
                                 : Eigen::MatrixXd((fit.rss / dof) * Z.transpose() * Z);
   const Eigen::MatrixXd V = Pinv * S * Pinv.transpose();
+  fit.robust = hac_rows_per_output > 0;
+  fit.cov = Eigen::MatrixXd::Zero(Fall.cols(), Fall.cols());
   for (Eigen::Index k = 0; k < n; ++k) {
     const auto c = keep[static_cast<size_t>(k)];
     fit.coef[c] = z[k] / scale[k];
     fit.stderr_[c] = std::sqrt(std::max(V(k, k), 0.0)) / scale[k];
+    for (Eigen::Index l = 0; l < n; ++l) fit.cov(c, keep[static_cast<size_t>(l)]) = V(k, l) / (scale[k] * scale[l]);
     if (!std::isfinite(fit.coef[c]) || !std::isfinite(fit.stderr_[c])) {   // instruments blind to this column
       fit.determined[static_cast<size_t>(c)] = false;
       fit.coef[c] = 0;
       fit.stderr_[c] = std::numeric_limits<double>::infinity();
     }
   }
+  for (Eigen::Index c = 0; c < fit.cov.rows(); ++c)
+    if (!fit.determined[static_cast<size_t>(c)]) {
+      fit.cov.row(c).setZero();
+      fit.cov.col(c).setZero();
+    }
   return fit;
 }
 

@@ -63,6 +63,10 @@ class BlockBuilder {
 struct Factors;
 struct Fit {
   Eigen::VectorXd coef, stderr_;
+  // The coefficients' covariance (cols x cols; the ordinary or, with hac_rows_per_output, the
+  // autocorrelation-robust one that stderr_ is the diagonal of); zero where not determined.
+  Eigen::MatrixXd cov;
+  bool robust = false;   // cov is the autocorrelation-robust one
   std::vector<bool> determined;
   int rank = 0;
   double rss = 0;

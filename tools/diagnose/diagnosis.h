@@ -264,6 +264,9 @@ Split in_column_order(const Split& s, const std::vector<std::string>& order, con
 // the drop of the residual sum of squares pays for them. Sums of squares below `floor` (the
 // rounding level of the targets) count as `floor`: exact data give no evidence from rounding.
 double delta_bic(double n, double rss_smaller, double rss_larger, double dk, double floor);
+// The Wald statistic of the fit's coefficients at..at+cols against zero under its covariance
+// (the determined ones; directions the covariance leaves unbounded count nothing).
+double wald(const Fit& f, Eigen::Index at, Eigen::Index cols);
 
 // The held-out test: the residual sum of squares falls by at least the fraction min_gain
 // (sums below `floor` count as `floor`).

@@ -937,7 +937,7 @@ double Diagnosis::static_bar(int joint, const std::vector<int>& order, const std
     const Candidate& c = cands_[static_cast<size_t>(k)];
     if (c.stateful || c.joint != joint || k == except) continue;
     const std::vector<int> trial = in_place(k, chosen);
-    const Fit f = refit(trial, true);
+    const Fit f = refit(trial, true, true);
     if (!refused(k, f.coef.tail(c.fit_cols.cols), refitted_damping(c.joint, f)).empty() || !evidence_holds(k, before, f)) continue;
     if (passing) passing->push_back(k);
     bar = std::min(bar, rss_on(residual_on(test_, trial, true, f), outs, test_.N));
@@ -971,7 +971,7 @@ int Diagnosis::stateful_rival(int accepted, const std::vector<int>& order, const
     const Candidate& c = cands_[static_cast<size_t>(k)];
     if (!c.stateful || c.joint != a.joint) continue;
     const std::vector<int> trial = in_place(k, chosen);
-    Fit f = refit(trial, true);
+    Fit f = refit(trial, true, true);
     if (!refused(k, f.coef.tail(c.fit_cols.cols)).empty() || !evidence_holds(k, before, f)) continue;
     Eigen::VectorXd rt = residual_on(test_, trial, true, f);
     const double rss = rss_on(rt, outs, test_.N);
