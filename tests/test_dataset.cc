@@ -246,6 +246,45 @@ TEST(Import, DecimationLowPassesFirstUnlessToldNotTo) {
   EXPECT_GT(plain, 30 * anti_aliased);   // 0.61: the slow sine's quantization error is not white
 }
 
+// The encoder's step, found in the raw log, goes into the dataset (`position_steps`): diagnose
+// judges what the quantization alone leaves in a joint's torque by it. A continuous column (a
+// position with noise) has none; a log that changes too few times is not judged.
+TEST(Import, AnEncodersStepIsFoundInTheRawLogAndRecorded) {
+  const double step = 2 * M_PI / (1 << 12);
+  std::mt19937_64 rng(3);
+  std::normal_distribution<double> noise(0, 1e-6);
+  spml::Table table;
+  table.source = "synthetic";
+  table.names = {"time", "a", "b", "ta", "tb"};
+  Eigen::VectorXd t = Eigen::VectorXd::LinSpaced(4000, 0, 3.999), a(t.size()), b(t.size()), tau(t.size());
+  for (Eigen::Index i = 0; i < t.size(); ++i) {
+    a[i] = 0.3 + step * std::round(std::sin(M_PI * t[i]) / step);   // on a grid, about an offset
+    b[i] = std::sin(M_PI * t[i]) + noise(rng);
+    tau[i] = std::cos(M_PI * t[i]);
+  }
+  table.columns = {t, a, b, tau, tau};
+  spml::ImportSpec spec;
+  spec.x = {"q:a=a", "q:b=b"};
+  spec.y = {"tau:a=ta", "tau:b=tb"};
+  spec.t = "time";
+  spec.conditioning.derive = true;
+  spec.conditioning.lowpass_hz = 20;
+  spec.conditioning.drop_edges = 307;
+  const spml::Dataset ds = spml::table_to_dataset(table, spec);
+  ASSERT_EQ(ds.provenance.count("position_steps"), 1u);
+  const auto steps = spml::parse_position_steps(ds.provenance.at("position_steps"));
+  ASSERT_EQ(steps.size(), 1u) << ds.provenance.at("position_steps");
+  EXPECT_NEAR(steps.at("q:a"), step, 1e-9 * step);
+  EXPECT_EQ(spml::parse_position_steps(spml::position_steps_text(steps)), steps);
+  EXPECT_TRUE(spml::parse_position_steps("q:a=x").empty());
+  EXPECT_TRUE(spml::parse_position_steps("q:a=-1").empty());
+  // Ten changes are too few to tell a grid from chance.
+  Eigen::VectorXd few = Eigen::VectorXd::Zero(100);
+  for (int i = 0; i < 10; ++i) few.tail(10 * (i + 1)).array() += step;
+  EXPECT_FALSE(spml::quantization_step(few));
+  EXPECT_FALSE(spml::quantization_step(b));
+}
+
 TEST(Import, TextLogsWithSeveralValuesPerSample) {
   auto dir = spml::test::temp_dir("textlog");
   std::ofstream((dir / "pos.txt").string()) << "1\n2\n3\n4\n5\n6\n";

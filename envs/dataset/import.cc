@@ -11,6 +11,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <iostream>
+#include <map>
 #include <iterator>
 #include <sstream>
 
@@ -446,10 +447,15 @@ double start_up_transient(const std::vector<Eigen::Matrix<double, 5, 1>>& sos, c
 }
 
 // Steps 1-6 of Conditioning on the chosen columns (in place), with the time column. Returns
-// the anti-alias cut-off applied (0: none).
+// the anti-alias cut-off applied (0: none); `steps` gets the quantization step of each position
+// it differentiates, where the raw log has one (spml/1 `position_steps`).
 double condition(const Conditioning& c, const std::string& source, Eigen::VectorXd& t, std::vector<Eigen::VectorXd>& xs,
-               std::vector<std::string>& xn, std::vector<Eigen::VectorXd>& ys) {
+               std::vector<std::string>& xn, std::vector<Eigen::VectorXd>& ys, std::map<std::string, double>& steps) {
   if (!c.any()) return 0;
+  if (c.derive)
+    for (size_t k = 0; k < xs.size(); ++k)
+      if (xn[k].rfind("q:", 0) == 0)
+        if (const auto step = quantization_step(xs[k])) steps[xn[k]] = *step;
   if (t.size() < 3) fail(source + ": filtering, differentiation, edge dropping and decimation need the time column (--t)");
   for (Eigen::Index i = 1; i < t.size(); ++i)
     if (!(t[i] > t[i - 1])) fail(source + ": time stamps must increase; row " + std::to_string(i) + " does not");
@@ -604,7 +610,8 @@ Dataset table_to_dataset(const Table& table, const ImportSpec& spec) {
       fail(msg.str());
     }
   }
-  const double anti_alias_hz = condition(spec.conditioning, table.source, tcol, xs, xn, ys);
+  std::map<std::string, double> steps;
+  const double anti_alias_hz = condition(spec.conditioning, table.source, tcol, xs, xn, ys, steps);
   const Eigen::Index N = xs.front().size();
   std::vector<SplitRange> ranges = spec.splits;
   if (ranges.empty()) ranges.push_back({"train", "", ""});
@@ -643,6 +650,7 @@ Dataset table_to_dataset(const Table& table, const ImportSpec& spec) {
   if (spec.conditioning.lowpass_hz > 0)
     ds.provenance["filter"] = lowpass_record_text({spec.conditioning.filter_order, spec.conditioning.lowpass_hz});
   if (spec.conditioning.derive) ds.provenance["derivatives"] = "central-difference";
+  if (!steps.empty()) ds.provenance["position_steps"] = position_steps_text(steps);
   if (spec.conditioning.decimate > 1) {
     DecimationRecord d{spec.conditioning.decimate, std::nullopt};
     if (anti_alias_hz > 0) d.anti_alias = LowpassRecord{kAntiAliasOrder, anti_alias_hz};

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <sstream>
+
+#include "spml/parse.h"
 #include <stdexcept>
 
 namespace spml {
@@ -182,6 +184,61 @@ std::optional<DecimationRecord> parse_decimation_record(const std::string& text)
   const std::string rest = text.substr(space + 1);
   if (rest == "plain") return d;
   if (rest.rfind("after ", 0) != 0 || !(d.anti_alias = parse_lowpass_record(rest.substr(6)))) return std::nullopt;
+  return d;
+}
+
+std::optional<double> quantization_step(const Eigen::VectorXd& x) {
+  std::vector<double> d;
+  for (Eigen::Index i = 1; i < x.size(); ++i)
+    if (const double step = std::fabs(x[i] - x[i - 1]); step > 0) d.push_back(step);
+  if (d.size() < 20) return std::nullopt;
+  const double smallest = *std::min_element(d.begin(), d.end());
+  // The smallest change, refined as the mean of the single steps, must divide all the others.
+  size_t whole = 0, single = 0;
+  double sum_single = 0;
+  for (double step : d) {
+    const double k = std::round(step / smallest);
+    if (std::fabs(step / smallest - k) > 0.01) continue;
+    ++whole;
+    if (k == 1) ++single, sum_single += step;
+  }
+  if (static_cast<double>(whole) < 0.999 * static_cast<double>(d.size()) || single == 0) return std::nullopt;
+  return sum_single / static_cast<double>(single);
+}
+
+std::string position_steps_text(const std::map<std::string, double>& steps) {
+  std::string out;
+  for (const auto& [name, step] : steps) out += (out.empty() ? "" : " ") + name + "=" + exact_text(step);
+  return out;
+}
+
+std::map<std::string, double> parse_position_steps(const std::string& text) {
+  std::map<std::string, double> out;
+  std::istringstream in(text);
+  for (std::string item; in >> item;) {
+    const auto eq = item.rfind('=');
+    const auto v = eq == std::string::npos ? std::nullopt : parse_number(item.substr(eq + 1));
+    if (!v || !(*v > 0) || eq == 0) return {};
+    out[item.substr(0, eq)] = *v;
+  }
+  return out;
+}
+
+DerivedSignals derive_like_import(const Eigen::VectorXd& raw, double rate_hz, const std::optional<LowpassRecord>& lowpass, const DecimationRecord& decimation) {
+  DerivedSignals d;
+  d.q = lowpass && lowpass->cutoff_hz < 0.5 * rate_hz ? filtfilt(butterworth_lowpass(lowpass->order, lowpass->cutoff_hz, rate_hz), raw) : raw;
+  d.qd = central_difference(d.q, 1 / rate_hz);
+  d.qdd = central_difference(d.qd, 1 / rate_hz);
+  if (decimation.anti_alias && decimation.anti_alias->cutoff_hz < 0.5 * rate_hz) {
+    const auto sos = butterworth_lowpass(decimation.anti_alias->order, decimation.anti_alias->cutoff_hz, rate_hz);
+    for (auto* v : {&d.q, &d.qd, &d.qdd}) *v = filtfilt(sos, *v);
+  }
+  const int keep = std::max(decimation.keep, 1);
+  for (auto* v : {&d.q, &d.qd, &d.qdd}) {
+    Eigen::VectorXd kept((v->size() + keep - 1) / keep);
+    for (Eigen::Index i = 0; i < kept.size(); ++i) kept[i] = (*v)[i * keep];
+    *v = kept;
+  }
   return d;
 }
 

@@ -456,7 +456,8 @@ class Diagnosis {
   // unexplained.cc (#22)
   nlohmann::json unexplained_joint(size_t o, const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test, std::ostringstream& csv) const;
   nlohmann::json unexplained(const std::string& out_dir, const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test) const;
-  nlohmann::json left_unexplained(const nlohmann::json& report, const Eigen::VectorXd& r_test) const;
+  nlohmann::json left_unexplained(nlohmann::json& report, const Eigen::VectorXd& r_test) const;
+  std::map<std::string, double> resolution_floor() const;
   nlohmann::json end_of_travel(const std::string& joint, const Eigen::VectorXd& r) const;
   void mark_nearest_candidates(nlohmann::json& report, const Eigen::VectorXd& r_test) const;
   std::set<std::string> nearest_candidate_joints(const std::pair<Eigen::VectorXd, Eigen::VectorXd>& written,

@@ -145,6 +145,10 @@ std::string report_summary(const nlohmann::json& r) {
     s << "  left on " << l["joint"].get<std::string>() << ": " << pct(l["rel_error_test"].get<double>())
       << " of its held-out torque, held by no cause in extended.xml and not predicted from the logged states enough to be `unexplained`"
       << (l.contains("at_an_end") ? "; " + at_an_end_text(l["at_an_end"]) : std::string()) << "\n";
+  for (const auto& f : r.value("at_resolution_floor", nlohmann::json::array()))
+    s << "  at the encoders' floor on " << f["joint"].get<std::string>() << ": " << pct(f["rel_error_test"].get<double>())
+      << " of its held-out torque left, what the positions' quantization alone leaves (RMS " << num(f["rmse_test"].get<double>()) << ", floor "
+      << num(f["floor_rmse"].get<double>()) << ")\n";
   return s.str();
 }
 
@@ -294,6 +298,17 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
         s << "what is missing depends on something the log does not hold (a load, a command, a temperature), or on the "
              "states too steeply for the GP's rows (a rigid stop or contact, whose force changes over a few encoder counts), or, on a "
              "joint whose torque is small against its noise, it is noise\n";
+    }
+  }
+  if (const auto floor = r.value("at_resolution_floor", nlohmann::json::array()); !floor.empty()) {
+    s << "\n## At the encoders' floor\n\n";
+    for (const auto& f : floor) {
+      const std::string j = f["joint"].get<std::string>();
+      s << "- " << j << ": extended.xml leaves " << pct(f["rel_error_test"].get<double>()) << " of its held-out torque (RMS "
+        << num(f["rmse_test"].get<double>()) << unit_of(r, j, "torque") << "), what the positions' quantization alone leaves through the "
+           "derived velocities and accelerations (" << num(f["floor_rmse"].get<double>()) << unit_of(r, j, "torque")
+        << ", from the encoder steps spml import recorded): this log determines no more of the joint's torque; finer encoders, or a lower "
+           "--lowpass where the motion allows, would\n";
     }
   }
   if (!r["notes"].empty()) {

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -59,5 +60,27 @@ struct DecimationRecord {
 };
 std::string decimation_record_text(const DecimationRecord& d);
 std::optional<DecimationRecord> parse_decimation_record(const std::string& text);
+
+// The step of a quantized position log (an encoder's count) from its raw samples: every
+// change between samples is a whole multiple of the smallest one (within 1 % of it, for 99.9 %
+// of the changes). nullopt where the log is not so (continuous values) or changes fewer than
+// 20 times.
+std::optional<double> quantization_step(const Eigen::VectorXd& x);
+
+// The record of the position columns' steps, root attribute `position_steps`
+// ("q:J1=0.00153398 q:J2=3.8147e-06"; what spml import found in the raw log).
+std::string position_steps_text(const std::map<std::string, double>& steps);
+// Empty where the text is not such a record (a reader ignores what it does not know).
+std::map<std::string, double> parse_position_steps(const std::string& text);
+
+// What spml import's --lowpass/--derive/--decimate make of one raw position log sampled at
+// `rate_hz`: the zero-phase `lowpass` (none: raw differences), two central differences, the
+// decimation's anti-alias pass on all three, every keep-th sample (import.cc's condition() on
+// one column, no edges dropped). For a consumer that needs the chain's effect on a position
+// error (diagnose's resolution floor), not for importing.
+struct DerivedSignals {
+  Eigen::VectorXd q, qd, qdd;
+};
+DerivedSignals derive_like_import(const Eigen::VectorXd& raw, double rate_hz, const std::optional<LowpassRecord>& lowpass, const DecimationRecord& decimation);
 
 }  // namespace spml
