@@ -1415,8 +1415,7 @@ TEST(DiagnoseBeyond, ACauseStandsOnItsOwnCoefficients) {
 // 48 % of its torque by the accelerations' quantization error, the elbow and the flange 5-6 %.
 // A twenty-second review had such joints `left_unexplained` ("a load, a command, a
 // temperature"). Now they are at the encoders' floor, which the import's recorded steps give;
-// a slow drift in time of a fifth of a joint's torque, on the same log, is still left
-// unexplained.
+// a slow drift in time of about the floor's size on the same log is still left unexplained.
 TEST(DiagnoseBeyond, TwelveBitEncodersLeaveAFloorNotAnEffect) {
   const auto dir = test::temp_dir("bits");
   Case c;
@@ -1436,13 +1435,63 @@ TEST(DiagnoseBeyond, TwelveBitEncodersLeaveAFloorNotAnEffect) {
     EXPECT_LT(f["floor_rmse"].get<double>(), 1.5 * f["rmse_test"].get<double>()) << f.dump();
   }
   EXPECT_EQ(at_floor.count("J1"), 1u) << r["at_resolution_floor"].dump();
-  m.extra_joint = 2;   // J2
-  const double a = 0.2 * std::sqrt(2.0) * 16.6, period = 0.45 * m.duration;
+  // A drift in time on the base of about its floor's size (RMS 0.35 N m against 0.59): within 1.5
+  // times the floor by magnitude, but slow, where the floor is not.
+  m.extra_joint = 0;   // J1
+  const double a = 0.5, period = 0.45 * m.duration;
   m.drift = [a, period](double t) { return a * std::sin(2 * M_PI * t / period); };
   r = diagnose_case(c, measured(c, (dir / "drift.h5").string(), 1, m), 0);
   bool listed = false;
-  for (const auto& l : r["left_unexplained"]) listed |= l["joint"] == "J2";
+  for (const auto& l : r["left_unexplained"]) listed |= l["joint"] == "J1";
   EXPECT_TRUE(listed) << r["left_unexplained"].dump() << r["at_resolution_floor"].dump() << joined(named(r));
+  for (const auto& f : r["at_resolution_floor"]) EXPECT_LE(f["slow_share"].get<double>(), 0.15) << f.dump();
+}
+
+// An effect only the fit rows hold (a twenty-third review's joint limit, reached in the first
+// 15 s of 30 only): the held-out rows are clean, and the fit split's 77 % on the joint was said
+// nowhere. Here a load on the shoulder for the first 12 s: listed, as on the fit split.
+TEST(DiagnoseBeyond, AnEffectOnlyTheFitRowsHoldIsLeftUnexplained) {
+  const auto dir = test::temp_dir("early");
+  Case c;
+  c.joints = 7;
+  c.user = c.truth = (dir / "arm.xml").string();
+  std::ofstream(c.user) << filled(kArm7, "DAMPING", "0.01");
+  Measurement m = issue_case_size();
+  m.extra_joint = 2;   // J2
+  m.drift = [](double t) { return t < 12 ? 3.0 * std::sin(2 * M_PI * t / 5) : 0.0; };
+  const auto r = diagnose_case(c, measured(c, (dir / "early.h5").string(), 1, m), 0);
+  bool listed = false;
+  for (const auto& l : r["left_unexplained"])
+    if (l["joint"] == "J2") {
+      listed = true;
+      EXPECT_EQ(l.value("split", ""), "fit") << l.dump();
+      EXPECT_GT(l["rel_error_fit"].get<double>(), 0.05) << l.dump();
+    }
+  EXPECT_TRUE(listed) << r["left_unexplained"].dump() << " " << joined(named(r)) << " " << r["final"]["rel_error_fit"].dump();
+}
+
+// A constant force on the vertical column slide is, on any log, the weight of a little less
+// mass it carries with that mass's inertia handed back to the armature: `parameters` writes
+// it so (a twenty-second review), and says now that an offset reads the same.
+TEST(DiagnoseBeyond, AnOffsetOnAVerticalSlideIsSaidToReadAsItsCarriedMass) {
+  const auto dir = test::temp_dir("lift");
+  Case c;
+  c.joints = 7;
+  c.user = (dir / "given.xml").string();
+  c.truth = (dir / "true.xml").string();
+  const std::string arm = filled(kArm7, "DAMPING", "0.01");
+  std::ofstream(c.user) << arm;
+  std::ofstream(c.truth) << filled(arm, "</mujoco>", R"(<custom><text name="spml.plugin.lift" data="type=offset joints=S1 c=5"/></custom></mujoco>)");
+  const auto r = diagnose_case(c, measured(c, (dir / "lift.h5").string(), 3, issue_case_size()), 0);
+  ASSERT_EQ(joined(named(r)), "parameters");
+  const auto& cause = r["causes"][0];
+  ASSERT_TRUE(cause.contains("reads_as_well")) << cause.dump();
+  ASSERT_EQ(cause["reads_as_well"].size(), 1u) << cause["reads_as_well"].dump();   // not the spring's or asymmetric friction's copies
+  const auto& a = cause["reads_as_well"][0];
+  EXPECT_EQ(a["effect"], "offset");
+  EXPECT_EQ(a["joint"], "S1");
+  EXPECT_GE(a["share"].get<double>(), 0.95);
+  EXPECT_NEAR(std::fabs(a["params"]["S1.c"].get<double>()), 5.0, 0.05 * 5.0) << a.dump();
 }
 
 // An effect outside the vocabulary that the vocabulary takes most of is said to be so. A

@@ -354,6 +354,7 @@ class Diagnosis {
   nlohmann::json cross_errors(const std::vector<int>& causes, bool base_free, const Fit& f) const;
   void build_report(const std::string& out_dir);
   nlohmann::json parameters_cause(MjcfEdits& edits, std::vector<std::string>& notes) const;
+  nlohmann::json reads_as_well(const Eigen::VectorXd& change, const std::set<std::string>& joints) const;
   nlohmann::json effect_cause(size_t i, const Fit& final_fit, bool free, MjcfEdits& edits, std::vector<std::string>& notes,
                               nlohmann::json& cross_after) const;
   nlohmann::json cross_report(const Fit& final_fit, bool free, const nlohmann::json& cross_after) const;
@@ -456,8 +457,9 @@ class Diagnosis {
   // unexplained.cc (#22)
   nlohmann::json unexplained_joint(size_t o, const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test, std::ostringstream& csv) const;
   nlohmann::json unexplained(const std::string& out_dir, const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test) const;
-  nlohmann::json left_unexplained(nlohmann::json& report, const Eigen::VectorXd& r_test) const;
-  std::map<std::string, double> resolution_floor() const;
+  nlohmann::json left_unexplained(nlohmann::json& report, const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test) const;
+  std::map<std::string, double> resolution_floor(const SplitData& split) const;
+  double low_band_share(const Eigen::VectorXd& r) const;
   nlohmann::json end_of_travel(const std::string& joint, const Eigen::VectorXd& r) const;
   void mark_nearest_candidates(nlohmann::json& report, const Eigen::VectorXd& r_test) const;
   std::set<std::string> nearest_candidate_joints(const std::pair<Eigen::VectorXd, Eigen::VectorXd>& written,

@@ -124,6 +124,13 @@ std::string report_summary(const nlohmann::json& r) {
     if (c.contains("nearest_candidate"))
       s << "  nearest candidate: " << c["nearest_candidate"]["joint"].get<std::string>() << " keeps structure it does not hold (unexplained)";
     if (c.contains("replaces_model_friction")) s << "  replaces the model's own level " << replaced_text(c["replaces_model_friction"]);
+    if (c["effect"] != "parameters" && c.contains("not_identifiable") && c["not_identifiable"].is_array() && !c["not_identifiable"].empty()) {
+      std::string keys;
+      for (const auto& k : c["not_identifiable"]) keys += (keys.empty() ? "" : ", ") + (k.is_string() ? k.get<std::string>() : k.dump());
+      s << "  not identifiable from these data: " << keys;
+    }
+    for (const auto& a : c.value("reads_as_well", nlohmann::json::array()))
+      s << "  reads as well as " << a["effect"].get<std::string>() << " on " << a["joint"].get<std::string>() << " (the log cannot tell them apart)";
     s << "\n";
   }
   if (r["causes"].empty()) s << "  no cause found: nothing passes the evidence and held-out tests\n";
@@ -142,8 +149,10 @@ std::string report_summary(const nlohmann::json& r) {
         << " of it held out, mostly through " << u["inputs"][0].get<std::string>()
         << (u.contains("at_an_end") ? "; " + at_an_end_text(u["at_an_end"]) : std::string()) << "\n";
   for (const auto& l : r.value("left_unexplained", nlohmann::json::array()))   // #22
-    s << "  left on " << l["joint"].get<std::string>() << ": " << pct(l["rel_error_test"].get<double>())
-      << " of its held-out torque, held by no cause in extended.xml and not predicted from the logged states enough to be `unexplained`"
+    s << "  left on " << l["joint"].get<std::string>() << ": "
+      << (l.value("split", "") == "fit" ? pct(l["rel_error_fit"].get<double>()) + " of its torque on the fit split (" + pct(l["rel_error_test"].get<double>()) + " held out)"
+                                        : pct(l["rel_error_test"].get<double>()) + " of its held-out torque")
+      << ", held by no cause in extended.xml and not predicted from the logged states enough to be `unexplained`"
       << (l.contains("at_an_end") ? "; " + at_an_end_text(l["at_an_end"]) : std::string()) << "\n";
   for (const auto& f : r.value("at_resolution_floor", nlohmann::json::array()))
     s << "  at the encoders' floor on " << f["joint"].get<std::string>() << ": " << pct(f["rel_error_test"].get<double>())
@@ -247,6 +256,13 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
     }
     if (c["effect"] == "parameters" && c.contains("written") && !c.contains("rejected")) s << written_parameters_text(c["written"]);
     if (c.contains("resolution")) s << "   - " << c["resolution"].get<std::string>() << "\n";
+    for (const auto& a : c.value("reads_as_well", nlohmann::json::array())) {
+      std::string values;
+      for (const auto& [key, v] : a["params"].items()) values += (values.empty() ? "" : ", ") + key + " " + num(v.get<double>());
+      s << "   - the torque this change states is what **" << a["effect"].get<std::string>() << "** on " << a["joint"].get<std::string>() << " would predict too ("
+        << values << ": " << pct(a["share"].get<double>()) << " of it): this log cannot tell the two apart; extended.xml writes the parameters, "
+           "and a log that moves the joint differently (another posture of the joints above it, or a load) would decide\n";
+    }
     if (c.contains("not_identifiable") && !c["not_identifiable"].empty() && c["effect"] == "parameters")
       s << "   - not identifiable from this data: " << c["not_identifiable"].size() << " base parameter(s)\n";
   }
@@ -287,9 +303,11 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
   if (const auto left = r.value("left_unexplained", nlohmann::json::array()); !left.empty()) {   // #22
     s << "\n## Left unexplained\n\n";
     for (const auto& l : left) {
-      s << "- " << l["joint"].get<std::string>() << ": extended.xml leaves " << pct(l["rel_error_test"].get<double>())
-        << " of its held-out torque; no cause in it holds that, and a GP over the logged states does not predict enough of it to report it "
-           "as `unexplained`: ";
+      s << "- " << l["joint"].get<std::string>() << ": extended.xml leaves "
+        << (l.value("split", "") == "fit" ? pct(l["rel_error_fit"].get<double>()) + " of its torque on the fit split (held out, where the rows do not hold it, " +
+                                                pct(l["rel_error_test"].get<double>()) + ")"
+                                          : pct(l["rel_error_test"].get<double>()) + " of its held-out torque")
+        << "; no cause in it holds that, and a GP over the logged states does not predict enough of it to report it as `unexplained`: ";
       if (l.contains("at_an_end"))
         s << at_an_end_text(l["at_an_end"]) << ": a stop, a limit or a contact there (whose force changes over a few encoder counts, too "
              "steeply and in too few rows for the GP), or something only that end of the motion holds, such as a reversal too sharp for the "
