@@ -473,7 +473,12 @@ double Diagnosis::low_band_share(const Eigen::VectorXd& r) const {
 nlohmann::json Diagnosis::left_unexplained(nlohmann::json& report, const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test) const {
   nlohmann::json out = nlohmann::json::array();
   report["at_resolution_floor"] = nlohmann::json::array();
-  const std::map<std::string, double> floor_test = resolution_floor(test_), floor_fit = resolution_floor(fit_);
+  std::map<std::string, double> floor_test, floor_fit;
+  try {
+    floor_test = resolution_floor(test_), floor_fit = resolution_floor(fit_);
+  } catch (const DatasetError& e) {   // a regressor row the quantized motion makes non-finite: no floor, said
+    report["notes"].push_back(std::string("the encoders' floor was not computed: ") + e.what());
+  }
   for (size_t j = 0; j < out_joints_.size(); ++j) {
     const std::string& joint = out_joints_[j];
     bool held = false;
