@@ -491,6 +491,8 @@ double condition(const Conditioning& c, const std::string& source, Eigen::Vector
         col = std::move(filtered);
       }
   }
+  // (derive_like_import, signal.h, restates this chain - low-pass, differences, anti-alias,
+  // decimation - for one column, for diagnose's encoders' floor: keep the two in step.)
   if (c.derive) {
     const size_t given = xn.size();
     for (size_t j = 0; j < given; ++j) {
