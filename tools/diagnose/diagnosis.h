@@ -145,13 +145,6 @@ inline std::string declaration_text(const Candidate& c, const std::string& confi
   return "type=" + std::string(c.plugin->name) + " joints=" + c.joint_name + " " + config;
 }
 
-// Names as one line, "a, b, c" (the keys of a message).
-inline std::string comma_list(const std::vector<std::string>& names) {
-  std::string out;
-  for (const auto& n : names) out += (out.empty() ? "" : ", ") + n;
-  return out;
-}
-
 // Does a velocity change sign between two consecutive rows (through zero or onto it)? A
 // reversal, for every rule that looks at rows near one.
 inline bool reverses(double before, double after) { return (before > 0 && after <= 0) || (before < 0 && after >= 0); }

@@ -22,9 +22,10 @@ std::string pct(double v) { return num(100 * v, 3) + " %"; }
 // of equally good fits: LuGre's fs and vs on a log without break-away were printed with one); a
 // value that extended.xml states otherwise (refitted with the parameters it writes) is shown
 // beside it, and a joint term of `parameters` rejected on its joint says so.
-// The model's own level a friction takes over (causes[].replaces_model_friction), as one phrase:
-// "frictionloss 0.69" or "spml.plugin.c shoulder.fc 0.69".
-std::string replaced_text(const nlohmann::json& own) {
+// Named values as one phrase: "S1.c 5.011"; one level deeper for the model's own level a
+// friction takes over (causes[].replaces_model_friction): "frictionloss 0.69" or
+// "spml.plugin.c shoulder.fc 0.69".
+std::string values_text(const nlohmann::json& own) {
   std::string out;
   for (const auto& [what, v] : own.items()) {
     if (v.is_number()) out += (out.empty() ? "" : ", ") + what + " " + num(v.get<double>());
@@ -123,12 +124,9 @@ std::string report_summary(const nlohmann::json& r) {
     if (c.contains("rejected")) s << "  REJECTED: " << c["rejected"].value("summary", "in simulation, rollouts worse with it");
     if (c.contains("nearest_candidate"))
       s << "  nearest candidate: " << c["nearest_candidate"]["joint"].get<std::string>() << " keeps structure it does not hold (unexplained)";
-    if (c.contains("replaces_model_friction")) s << "  replaces the model's own level " << replaced_text(c["replaces_model_friction"]);
-    if (c["effect"] != "parameters" && c.contains("not_identifiable") && c["not_identifiable"].is_array() && !c["not_identifiable"].empty()) {
-      std::string keys;
-      for (const auto& k : c["not_identifiable"]) keys += (keys.empty() ? "" : ", ") + (k.is_string() ? k.get<std::string>() : k.dump());
-      s << "  not identifiable from these data: " << keys;
-    }
+    if (c.contains("replaces_model_friction")) s << "  replaces the model's own level " << values_text(c["replaces_model_friction"]);
+    if (c["effect"] != "parameters" && c.contains("not_identifiable") && !c["not_identifiable"].empty())   // an effect's keys (strings)
+      s << "  not identifiable from these data: " << comma_list(c["not_identifiable"].get<std::vector<std::string>>());
     for (const auto& a : c.value("reads_as_well", nlohmann::json::array()))
       s << "  reads as well as " << a["effect"].get<std::string>() << " on " << a["joint"].get<std::string>() << " (the log cannot tell them apart)";
     s << "\n";
@@ -241,7 +239,7 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
     if (c.contains("rejected")) s << " - **rejected, not in extended.xml**: " << c["rejected"].value("reason", "");
     if (c.contains("nearest_candidate")) s << " - **a nearest candidate**: " << c["nearest_candidate"]["why"].get<std::string>();
     if (c.contains("replaces_model_friction"))
-      s << " - replaces the model's own friction level " << replaced_text(c["replaces_model_friction"]) << " (0 in extended.xml)";
+      s << " - replaces the model's own friction level " << values_text(c["replaces_model_friction"]) << " (0 in extended.xml)";
     s << "\n   - " << params_text(c, "\n   - ") << "\n";
     if (c.value("written_as", "") == "mjcf") {   // a spring or viscous friction in MuJoCo's own terms (written_form.cc)
       const auto& m = c["mjcf"];
@@ -256,13 +254,10 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
     }
     if (c["effect"] == "parameters" && c.contains("written") && !c.contains("rejected")) s << written_parameters_text(c["written"]);
     if (c.contains("resolution")) s << "   - " << c["resolution"].get<std::string>() << "\n";
-    for (const auto& a : c.value("reads_as_well", nlohmann::json::array())) {
-      std::string values;
-      for (const auto& [key, v] : a["params"].items()) values += (values.empty() ? "" : ", ") + key + " " + num(v.get<double>());
+    for (const auto& a : c.value("reads_as_well", nlohmann::json::array()))
       s << "   - the torque this change states is what **" << a["effect"].get<std::string>() << "** on " << a["joint"].get<std::string>() << " would predict too ("
-        << values << ": " << pct(a["share"].get<double>()) << " of it): this log cannot tell the two apart; extended.xml writes the parameters, "
+        << values_text(a["params"]) << ": " << pct(a["share"].get<double>()) << " of it): this log cannot tell the two apart; extended.xml writes the parameters, "
            "and a log that moves the joint differently (another posture of the joints above it, or a load) would decide\n";
-    }
     if (c.contains("not_identifiable") && !c["not_identifiable"].empty() && c["effect"] == "parameters")
       s << "   - not identifiable from this data: " << c["not_identifiable"].size() << " base parameter(s)\n";
   }

@@ -473,12 +473,18 @@ double Diagnosis::low_band_share(const Eigen::VectorXd& r) const {
 nlohmann::json Diagnosis::left_unexplained(nlohmann::json& report, const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test) const {
   nlohmann::json out = nlohmann::json::array();
   report["at_resolution_floor"] = nlohmann::json::array();
+  // The floors (two splits, five grids each) only where some joint is far enough off to need one.
+  auto beyond_share = [&](const char* key) {
+    for (const auto& [joint, rel] : report["final"][key].items())
+      if (rel.is_number() && rel.get<double>() > kLeftShare) return true;
+    return false;
+  };
   std::map<std::string, double> floor_test, floor_fit;
-  try {
-    floor_test = resolution_floor(test_), floor_fit = resolution_floor(fit_);
-  } catch (const DatasetError& e) {   // a regressor row the quantized motion makes non-finite: no floor, said
-    report["notes"].push_back(std::string("the encoders' floor was not computed: ") + e.what());
-  }
+  if (beyond_share("rel_error_test") || beyond_share("rel_error_fit")) try {
+      floor_test = resolution_floor(test_), floor_fit = resolution_floor(fit_);
+    } catch (const DatasetError& e) {   // a regressor row the quantized motion makes non-finite: no floor, said
+      report["notes"].push_back(std::string("the encoders' floor was not computed: ") + e.what());
+    }
   for (size_t j = 0; j < out_joints_.size(); ++j) {
     const std::string& joint = out_joints_[j];
     bool held = false;
@@ -489,8 +495,9 @@ nlohmann::json Diagnosis::left_unexplained(nlohmann::json& report, const Eigen::
     // Far off on a split: beyond kLeftShare, and not that split's floor.
     auto far = [&](const char* split, const Eigen::VectorXd& r, Eigen::Index N, double floor, double& slow) {
       const double rel = report["final"][std::string("rel_error_") + split].value(joint, 0.0), rmse = report["final"][std::string("rmse_") + split].value(joint, 0.0);
+      if (!(rel > kLeftShare)) return false;
       slow = low_band_share(r.segment(o * N, N));
-      return rel > kLeftShare && !(rmse <= kFloorMargin * floor && slow <= kSlowShare);
+      return !(rmse <= kFloorMargin * floor && slow <= kSlowShare);
     };
     double slow_test = 0, slow_fit = 0;
     const bool test_far = far("test", r_test, test_.N, at_floor, slow_test), fit_far = !test_far && far("fit", r_fit, fit_.N, at_floor_fit, slow_fit);
