@@ -104,13 +104,21 @@ nlohmann::json Diagnosis::parameters_cause(MjcfEdits& edits, std::vector<std::st
   }
   const nlohmann::json after = metrics(pf.residual, residual_on(test_, {}, true, pf));
   Eigen::VectorXd change = Eigen::VectorXd::Zero(fit_.base.cols);   // what `parameters` states, against the MJCF
+  // A change in joints' own attributes alone (damping, stiffness, frictionloss) is already the
+  // vocabulary's form in MuJoCo's terms: a viscous friction "reading as well" as a damping
+  // error said nothing, and said it on every damping error.
+  bool joint_terms_only = true;
   for (int i = 0; i < base_.rank && i < fit_.base.cols; ++i)
-    if (est.determined[static_cast<size_t>(i)] && parameters_listed_[static_cast<size_t>(i)]) change[i] = est.coef[i];
+    if (est.determined[static_cast<size_t>(i)] && parameters_listed_[static_cast<size_t>(i)]) {
+      change[i] = est.coef[i];
+      for (const auto& term : term_names(base_.names[static_cast<size_t>(i)])) joint_terms_only = joint_terms_only && joint_attribute_term(term).has_value();
+    }
   nlohmann::json j{{"effect", "parameters"}, {"joints", joints.empty() ? nlohmann::json(out_joints_) : nlohmann::json(joints)},
                    {"params", params}, {"stderr", se}, {"prior", prior}, {"not_identifiable", undetermined},
                    {"delta_bic", parameters_delta_bic_}};
   put_after(j, after);
-  if (nlohmann::json also = reads_as_well(fit_.base.times(change), joints); !also.empty()) j["reads_as_well"] = also;
+  if (!joint_terms_only)
+    if (nlohmann::json also = reads_as_well(fit_.base.times(change), joints); !also.empty()) j["reads_as_well"] = also;
   // What is written: the consistent fit (written_parameters.cc), every fitted body realizable.
   const size_t before = notes.size();
   const MjcfEdits id_edits = identified_model_edits(*reg_, written_->id, notes);
