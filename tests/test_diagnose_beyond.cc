@@ -1569,7 +1569,7 @@ TEST(DiagnoseBeyond, AGpOnTheEncodersFloorIsNoEffect) {
       EXPECT_LE(f["rmse_test"].get<double>(), 2 * f["floor_rmse"].get<double>()) << f.dump();
     }
   EXPECT_TRUE(yaw) << r["at_resolution_floor"].dump();
-  // A cubic damping on pitch1 of three times its floor (RMS), slow as the motion is.
+  // A cubic damping on pitch1 (60 qd^3 N m), slow as the motion is.
   m.extra_joint = 2;
   m.extra = [](double, double qd) { return 60.0 * qd * qd * qd; };
   r = diagnose_case(c, measured(c, (dir / "cubic.h5").string(), 156, m), 0);
