@@ -452,7 +452,7 @@ class Diagnosis {
   nlohmann::json unexplained(const std::string& out_dir, const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test) const;
   nlohmann::json left_unexplained(nlohmann::json& report, const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test) const;
   std::map<std::string, double> resolution_floor(const SplitData& split) const;
-  bool at_floor(const std::string& joint, const Eigen::VectorXd& r) const;
+  bool residual_at_floor(const std::string& joint, const Eigen::VectorXd& r) const;
   double low_band_share(const Eigen::VectorXd& r) const;
   nlohmann::json end_of_travel(const std::string& joint, const Eigen::VectorXd& r) const;
   void mark_nearest_candidates(nlohmann::json& report, const Eigen::VectorXd& r_test) const;
@@ -508,7 +508,7 @@ class Diagnosis {
   FilterPlan filter_plan_;
   DelayResult delay_;   // #22
   std::vector<int> offset_beside_;   // #22: causes beside the delay search's nuisance (offset_beside)
-  mutable std::optional<std::map<std::string, double>> floor_test_;   // resolution_floor(test_), formed on first use (at_floor)
+  mutable std::optional<std::map<std::string, double>> floor_test_;   // resolution_floor(test_), formed on first use (residual_at_floor)
   mutable std::map<std::string, double> gp_share_at_floor_;           // what the GP predicted on joints left at their floor (unexplained)
   mutable std::optional<bool> degrees_;   // the model file's hinge angles in degrees (written_form.cc)
   mutable std::optional<std::vector<std::string>> defined_joints_;   // the joints the model file itself defines (written_form.cc)

@@ -263,7 +263,7 @@ nlohmann::json Diagnosis::unexplained(const std::string& out_dir, const Eigen::V
       rows.precision(10);
       if (nlohmann::json j = unexplained_joint(o, r_fit, r_test, rows); !j.is_null()) {
         const auto at = static_cast<Eigen::Index>(o) * test_.N;
-        if (at_floor(out_joints_[o], r_test.segment(at, test_.N))) {
+        if (residual_at_floor(out_joints_[o], r_test.segment(at, test_.N))) {
           gp_share_at_floor_[out_joints_[o]] = j["share"].get<double>();
           continue;
         }
@@ -461,6 +461,9 @@ std::map<std::string, double> Diagnosis::resolution_floor(const SplitData& split
 constexpr double kFloorMargin = 2;
 constexpr double kSlowShare = 0.15;
 
+// The rule above, on a residual's RMS, its floor and its low-band share.
+static bool within_floor(double rmse, double floor, double slow) { return rmse <= kFloorMargin * floor && slow <= kSlowShare; }
+
 // The share of a test-split series' energy below a quarter of the band the data hold (the
 // import's low-pass, or diagnose's own; an eighth of the rate without either): where the
 // quantization floor has next to nothing (its accelerations' error grows as f^2 up to the cut-off).
@@ -478,7 +481,7 @@ double Diagnosis::low_band_share(const Eigen::VectorXd& r) const {
 // signals predicts much of that residual, which is M qdd's share of the quantization error read
 // back through qdd: a twenty-fifth review's model-exact 10-bit log under a stepped sine had the
 // yaw joint `unexplained` through qdd:yaw (73 % held out) where its residual was the floor.
-bool Diagnosis::at_floor(const std::string& joint, const Eigen::VectorXd& r) const {
+bool Diagnosis::residual_at_floor(const std::string& joint, const Eigen::VectorXd& r) const {
   if (!floor_test_) try {
       floor_test_ = resolution_floor(test_);
     } catch (const DatasetError&) {   // left_unexplained says why there is no floor
@@ -487,7 +490,7 @@ bool Diagnosis::at_floor(const std::string& joint, const Eigen::VectorXd& r) con
   const auto found = floor_test_->find(joint);
   if (found == floor_test_->end() || !(found->second > 0) || r.size() == 0) return false;
   const double rmse = std::sqrt(r.squaredNorm() / static_cast<double>(r.size()));
-  return rmse <= kFloorMargin * found->second && low_band_share(r) <= kSlowShare;
+  return within_floor(rmse, found->second, low_band_share(r));
 }
 
 // The joints the written model leaves far off (kLeftShare) that no `unexplained` entry holds,
@@ -521,7 +524,7 @@ nlohmann::json Diagnosis::left_unexplained(nlohmann::json& report, const Eigen::
       const double rel = report["final"][std::string("rel_error_") + split].value(joint, 0.0), rmse = report["final"][std::string("rmse_") + split].value(joint, 0.0);
       if (!(rel > kLeftShare)) return false;
       slow = low_band_share(r.segment(o * N, N));
-      return !(rmse <= kFloorMargin * floor && slow <= kSlowShare);
+      return !within_floor(rmse, floor, slow);
     };
     double slow_test = 0, slow_fit = 0;
     const bool test_far = far("test", r_test, test_.N, at_floor, slow_test), fit_far = !test_far && far("fit", r_fit, fit_.N, at_floor_fit, slow_fit);
