@@ -514,7 +514,9 @@ nlohmann::json expect_stick_slip(const std::filesystem::path& dir, int s, double
       EXPECT_LE(fs_error, 0.2);
       EXPECT_FALSE(said_free) << free.dump();
     }
-    if (fs == BreakAway::within_20_either_way) EXPECT_LE(fs_error, 0.2);
+    if (fs == BreakAway::within_20_either_way) {
+      EXPECT_LE(fs_error, 0.2);
+    }
     if (fs == BreakAway::within_20_or_said_free) {
       EXPECT_TRUE(fs_error <= 0.2 || said_free) << "fs off by " << fs_error;
     }
@@ -1588,6 +1590,59 @@ TEST(DiagnoseBeyond, AGpOnTheEncodersFloorIsNoEffect) {
   for (const auto& u : r["unexplained"])
     if (u["joint"] == "pitch1" && u.contains("share")) held = true;
   EXPECT_TRUE(held) << r["unexplained"].dump() << r["at_resolution_floor"].dump() << joined(named(r));
+}
+
+// A reference of holds for every joint of kArmYawSlide: every 0.25 s a new set point, reached
+// by an 80 ms ramp; each joint's set points a sum of four sines (0.1-1 Hz) of 0.2 rad each
+// (the slide 0.025 m).
+std::string holds(const std::filesystem::path& path, double duration) {
+  const std::vector<double> amp = {0.2, 0.025, 0.2, 0.2};
+  const double f[4][4] = {{0.13, 0.41, 0.67, 0.92}, {0.21, 0.36, 0.58, 0.87}, {0.11, 0.47, 0.74, 0.95}, {0.17, 0.29, 0.62, 0.81}};
+  auto set_point = [&](size_t j, double t) {
+    double v = 0;
+    for (int i = 0; i < 4; ++i) v += amp[j] * std::sin(2 * M_PI * f[j][i] * t + 1.3 * (i + 1) * (j + 1));
+    return v;
+  };
+  std::ofstream out(path);
+  out.precision(12);
+  out << "t,q:yaw,q:slide,q:pitch1,q:pitch2\n";
+  for (double t = 0; t <= duration + 1e-9; t += 0.25)
+    for (const double at : {t, t + 0.17}) {   // the hold, then the ramp's start
+      if (at > duration) break;
+      out << at;
+      for (size_t j = 0; j < amp.size(); ++j) out << "," << set_point(j, t);
+      out << "\n";
+    }
+  return path.string();
+}
+
+// A reference of holds puts much of the torque into the import's transition band, and the
+// states went through the import's low-pass as the torques did. Filtered a second time, the
+// model's columns lost that content: the MJCF that made the log (kArmYawSlide, a twenty-fifth
+// review's arm) left 8.3 % of every joint's torque at 14 bits, `parameters` was named, and at
+// 10 bits `stick_slip` on two joints of four (3 of 3 seeds). A second pass would change these
+// torques by 8 % of their RMS: the smooth columns are now left as the states made them
+// (parallel_filter.again_above_hz), and the same logs name nothing.
+TEST(DiagnoseBeyond, AReferenceOfHoldsNamesNothingOnTheModelThatMadeIt) {
+  SPML_SKIP_UNDER_SANITIZERS();
+  const auto dir = test::temp_dir("holds");
+  Case c;
+  c.joints = 4;
+  c.user = c.truth = (dir / "given.xml").string();
+  std::ofstream(c.user) << kArmYawSlide;
+  Measurement m = issue_case_size();
+  m.reference = holds(dir / "holds.csv", m.duration);
+  for (const int bits : {14, 10}) {
+    m.bits = bits;
+    const auto r = diagnose_case(c, measured(c, (dir / ("holds" + std::to_string(bits) + ".h5")).string(), 151, m), 0);
+    EXPECT_EQ(joined(named(r)), "nothing") << bits << " bits";
+    EXPECT_GT(r["parallel_filter"]["second_pass_change"].get<double>(), 0.05) << r["parallel_filter"].dump();
+    EXPECT_GT(r["parallel_filter"]["again_above_hz"].get<double>(), 0) << r["parallel_filter"].dump();
+    EXPECT_TRUE(r["unexplained"].empty()) << r["unexplained"].dump();
+    if (bits == 14) {   // filtered twice, 8.3 % on every joint
+      for (const auto& [joint, e] : r["baseline"]["rel_error_test"].items()) EXPECT_LT(e.get<double>(), 0.06) << joint;
+    }
+  }
 }
 
 // An effect outside the vocabulary that the vocabulary takes most of is said to be so. A

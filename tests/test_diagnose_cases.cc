@@ -436,7 +436,8 @@ namespace {
 // The parallel filter runs within each record: a step at the junction of two stacked records
 // stays a step (filtered across it, it would be smeared over the filter's response).
 TEST(DiagnoseCases, FilterStaysWithinRecords) {
-  const auto sos = butterworth_lowpass(4, 5, 200);
+  diagnose_detail::ParallelFilter sos;
+  sos.sections = butterworth_lowpass(4, 5, 200);
   Eigen::VectorXd b(400);
   b.head(100).setConstant(1.0);
   b.segment(100, 100).setConstant(-1.0);   // output 0: records of 100 rows each
@@ -447,6 +448,39 @@ TEST(DiagnoseCases, FilterStaysWithinRecords) {
   diagnose_detail::filter_stacked(sos, across, 200);
   EXPECT_LT((within - b).cwiseAbs().maxCoeff(), 1e-6);
   EXPECT_GT((across - b).cwiseAbs().maxCoeff(), 0.1);
+}
+
+// Under a recorded low-pass (a probe set) a column that is a smooth function of the filtered
+// states stays as it is - filtered again, a velocity with content in the filter's transition
+// band loses what the torques kept (a reference of holds left 8.3 % of an exact model's torque)
+// - while the sign of that velocity, which switches, goes through the low-pass as the torques'
+// Coulomb friction did. Without a probe (a detected filter: raw torques) both are filtered.
+TEST(DiagnoseCases, ARecordedLowPassFiltersOnlyTheColumnsThatSwitch) {
+  const double rate = 200, cutoff = 20;
+  Eigen::VectorXd ramp(2000);   // trapezoidal velocity: 80 ms ramps between 0.25 s holds
+  for (Eigen::Index i = 0; i < ramp.size(); ++i) {
+    const double t = std::fmod(static_cast<double>(i) / rate, 1.0);
+    ramp[i] = t < 0.08 ? t / 0.08 : t < 0.25 ? 1 : t < 0.33 ? (0.33 - t) / 0.08 : t < 0.5 ? 0 : t < 0.58 ? -(t - 0.5) / 0.08 : t < 0.75 ? -1 : t < 0.83 ? -(0.83 - t) / 0.08 : 0;
+  }
+  const auto sos = butterworth_lowpass(4, cutoff, rate);
+  const Eigen::VectorXd qd = filtfilt(sos, ramp), qdd = central_difference(qd, 1 / rate);   // what import made of it
+  Eigen::MatrixXd A(qd.size(), 2);
+  A.col(0) = qdd;
+  for (Eigen::Index i = 0; i < qd.size(); ++i) A(i, 1) = qd[i] > 1e-3 ? 1.0 : qd[i] < -1e-3 ? -1.0 : 0.0;
+  const Eigen::MatrixXd raw = A;
+  diagnose_detail::ParallelFilter recorded, detected;
+  recorded.sections = detected.sections = sos;
+  recorded.probe_hz = diagnose_detail::kSwitchingProbe * cutoff;
+  recorded.probe = butterworth_lowpass(4, recorded.probe_hz, rate);
+  recorded.probe_half = butterworth_lowpass(4, 0.5 * recorded.probe_hz, rate);
+  diagnose_detail::filter_stacked(recorded, A, A.rows());
+  EXPECT_EQ((A.col(0) - raw.col(0)).cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_LT((A.col(1) - filtfilt(sos, raw.col(1))).cwiseAbs().maxCoeff(), 1e-12);
+  // Filtered twice, the acceleration (the inertial torque) would have lost 4 % of its peak.
+  EXPECT_GT((filtfilt(sos, qdd) - qdd).cwiseAbs().maxCoeff(), 0.03 * qdd.cwiseAbs().maxCoeff());
+  Eigen::MatrixXd B = raw;
+  diagnose_detail::filter_stacked(detected, B, B.rows());
+  EXPECT_LT((B.col(0) - filtfilt(sos, qdd)).cwiseAbs().maxCoeff(), 1e-9);
 }
 
 // Several records of one robot (--data repeated): fitted together, each record's test part held

@@ -78,7 +78,7 @@ struct SplitData {
   Eigen::VectorXd soft;        // MuJoCo's frictionloss beyond its ideal level (part of friction; empty: none)
   Eigen::VectorXd own_level;   // the model's own friction levels per output, stacked (own_friction.cc; empty: none)
   Eigen::Index N = 0;
-  std::vector<Section> sos;       // the parallel filter on this split's time base (empty: none)
+  ParallelFilter sos;             // the parallel filter on this split's time base (empty: none)
   std::vector<Eigen::Index> runs; // first rows of the records after the first (several --data)
   const SplitData* continues = nullptr;   // the split whose record this one continues (a hold-out from its end; stateful plugins carry their state)
 };
@@ -299,6 +299,7 @@ class Diagnosis {
   // prepare.cc
   SplitData prepare(const Split& s, const std::vector<Eigen::Index>& runs = {}, const SplitData* continues = nullptr);
   void plan_parallel_filter();
+  void weigh_second_pass();
   void apply_filter(SplitData& d) const;
   // candidates.cc
   void find_candidates();

@@ -129,31 +129,73 @@ FilterPlan plan_filter(const Dataset& ds, const std::vector<Eigen::VectorXd>& q,
   return plan;
 }
 
-std::vector<Section> plan_sections(const FilterPlan& plan, const Split& s) {
-  if (plan.source == FilterPlan::Source::none || s.t.size() != s.rows() || s.rows() < 3) return {};
+ParallelFilter plan_sections(const FilterPlan& plan, const Split& s) {
+  ParallelFilter f;
+  if (plan.source == FilterPlan::Source::none || s.t.size() != s.rows() || s.rows() < 3) return f;
   const double dt = median_step(s.t);
-  if (!(dt > 0) || plan.lowpass.cutoff_hz >= kWidestLowpassShare / dt) return {};
-  return butterworth_lowpass(plan.lowpass.order, plan.lowpass.cutoff_hz, 1.0 / dt);
+  if (!(dt > 0) || plan.lowpass.cutoff_hz >= kWidestLowpassShare / dt) return f;
+  f.sections = butterworth_lowpass(plan.lowpass.order, plan.lowpass.cutoff_hz, 1.0 / dt);
+  // Below 0.4 of the rate, a probe low-pass still separates the columns (filter_stacked); a
+  // cut-off too near the rate for one leaves every column filtered, as before the probe.
+  const double probe = kSwitchingProbe * plan.lowpass.cutoff_hz;
+  if (plan.smooth_kept && probe < kWidestLowpassShare / dt) {
+    f.probe = butterworth_lowpass(4, probe, 1.0 / dt);
+    f.probe_half = butterworth_lowpass(4, 0.5 * probe, 1.0 / dt);
+    f.probe_hz = probe;
+  }
+  return f;
 }
 
-void filter_stacked(const std::vector<Section>& sos, Eigen::MatrixXd& A, Eigen::Index N, const std::vector<Eigen::Index>& runs) {
-  if (sos.empty() || N < 2) return;
+namespace {
+
+// The first rows of one output's segments (runs split it; the last bound is N).
+std::vector<Eigen::Index> segment_bounds(Eigen::Index N, const std::vector<Eigen::Index>& runs) {
   std::vector<Eigen::Index> bounds{0};
   bounds.insert(bounds.end(), runs.begin(), runs.end());
   bounds.push_back(N);
-  for (Eigen::Index c = 0; c < A.cols(); ++c)
+  return bounds;
+}
+
+// Whether column c switches faster than the states' band: the power above the probe more than
+// kSwitchingShare of the power above half of it (per segment; none above half: smooth).
+bool switches(const ParallelFilter& f, const Eigen::MatrixXd& A, Eigen::Index c, Eigen::Index N, const std::vector<Eigen::Index>& bounds) {
+  double above = 0, above_half = 0, total = 0;
+  for (Eigen::Index o = 0; o * N < A.rows(); ++o)
+    for (size_t r = 0; r + 1 < bounds.size(); ++r) {
+      const Eigen::Index at = o * N + bounds[r], len = bounds[r + 1] - bounds[r];
+      if (len < 2) continue;
+      const Eigen::VectorXd seg = A.col(c).segment(at, len);
+      total += seg.squaredNorm();
+      above += (seg - filtfilt(f.probe, seg)).squaredNorm();
+      above_half += (seg - filtfilt(f.probe_half, seg)).squaredNorm();
+    }
+  return above_half > 1e-12 * total && above > kSwitchingShare * above_half;
+}
+
+}  // namespace
+
+// With a probe (FilterPlan::smooth_kept), a column that does not switch is left as it is
+// (prepare.cc, plan_parallel_filter says why); one that switches (sign(qd), a LuGre force, a
+// ripple faster than the band) holds power far above the band, which the torques lost, and
+// goes through the low-pass again, as the discontinuous forces parallel filtering is for.
+void filter_stacked(const ParallelFilter& f, Eigen::MatrixXd& A, Eigen::Index N, const std::vector<Eigen::Index>& runs) {
+  if (f.sections.empty() || N < 2) return;
+  const std::vector<Eigen::Index> bounds = segment_bounds(N, runs);
+  for (Eigen::Index c = 0; c < A.cols(); ++c) {
+    if (!f.probe.empty() && !switches(f, A, c, N, bounds)) continue;
     for (Eigen::Index o = 0; o * N < A.rows(); ++o)
       for (size_t r = 0; r + 1 < bounds.size(); ++r) {
         const Eigen::Index at = o * N + bounds[r], len = bounds[r + 1] - bounds[r];
         if (len < 2) continue;
         const Eigen::VectorXd seg = A.col(c).segment(at, len);
-        if (seg.cwiseAbs().maxCoeff() > 0) A.col(c).segment(at, len) = filtfilt(sos, seg);
+        if (seg.cwiseAbs().maxCoeff() > 0) A.col(c).segment(at, len) = filtfilt(f.sections, seg);
       }
+  }
 }
 
-void filter_stacked(const std::vector<Section>& sos, Eigen::VectorXd& b, Eigen::Index N, const std::vector<Eigen::Index>& runs) {
+void filter_stacked(const ParallelFilter& f, Eigen::VectorXd& b, Eigen::Index N, const std::vector<Eigen::Index>& runs) {
   Eigen::MatrixXd B = b;
-  filter_stacked(sos, B, N, runs);
+  filter_stacked(f, B, N, runs);
   b = B.col(0);
 }
 

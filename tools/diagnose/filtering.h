@@ -30,8 +30,16 @@ struct FilterPlan {
   // too little above the band to detect): what interpolates the columns (the delay search)
   // also averages their errors.
   bool raw_differences = false;
+  // A recorded low-pass the states went through as well: the most a second pass changes the
+  // fit split's (mean-free) torques on a joint, relative to their RMS, and whether that is more
+  // than kSecondPassChange, so that the smooth columns are left filtered once (prepare.cc,
+  // weigh_second_pass: ParallelFilter's probe).
+  double second_pass_change = 0;
+  bool smooth_kept = false;
   std::string description;    // for report.json: what was done and why
 };
+
+constexpr double kSecondPassChange = 0.05;
 
 // The plan for a dataset: its recorded `filter` attribute (the torques already went through
 // it: only the model's columns are filtered), else - when the accelerations hold noise above
@@ -44,14 +52,33 @@ FilterPlan plan_filter(const Dataset& ds, const std::vector<Eigen::VectorXd>& q,
 // K of the dataset's decimation record (1: none, or not understood).
 double decimated_by(const Dataset& ds);
 
-// The sections for one split (empty when the plan is none, the split has no time stamps, or
-// the cut-off lies at or above 0.4 of its sampling rate: nothing left to filter).
-std::vector<Section> plan_sections(const FilterPlan& plan, const Split& s);
+// Under a recorded low-pass, a column is filtered again when the power it holds above
+// kSwitchingProbe times the cut-off is more than kSwitchingShare of what it holds above half
+// that (filtering.cc, filter_stacked says why): a step's spectrum falls as 1/f^2 (about a third
+// of its power above 1.5 fc lies above 3 fc), a smooth function of states that went through
+// the low-pass falls with the filter's own slope (well under 1e-3).
+constexpr double kSwitchingShare = 0.03;
+constexpr double kSwitchingProbe = 3;
 
-// Filters every column of a stacked matrix (rows o*N .. o*N+N-1 are output o) segment-wise;
+// One split's parallel filter: its sections and, when the states themselves went through the
+// data's low-pass (a recorded filter), the probe low-pass that tells the columns that switch
+// from those that are smooth functions of the filtered states (empty: every column filtered).
+struct ParallelFilter {
+  std::vector<Section> sections;
+  std::vector<Section> probe, probe_half;   // low-passes at probe_hz and half of it
+  double probe_hz = 0;
+  bool empty() const { return sections.empty(); }
+};
+
+// The filter for one split (empty when the plan is none, the split has no time stamps, or
+// the cut-off lies at or above 0.4 of its sampling rate: nothing left to filter).
+ParallelFilter plan_sections(const FilterPlan& plan, const Split& s);
+
+// Filters the columns of a stacked matrix (rows o*N .. o*N+N-1 are output o) segment-wise;
 // `runs` (first rows of the runs after the first, when several records are stacked) splits each
-// output's rows further, so that no filter runs across the junction of two records.
-void filter_stacked(const std::vector<Section>& sos, Eigen::MatrixXd& A, Eigen::Index N, const std::vector<Eigen::Index>& runs = {});
-void filter_stacked(const std::vector<Section>& sos, Eigen::VectorXd& b, Eigen::Index N, const std::vector<Eigen::Index>& runs = {});
+// output's rows further, so that no filter runs across the junction of two records. With a
+// probe, a column that does not switch (kSwitchingShare) is left as is.
+void filter_stacked(const ParallelFilter& f, Eigen::MatrixXd& A, Eigen::Index N, const std::vector<Eigen::Index>& runs = {});
+void filter_stacked(const ParallelFilter& f, Eigen::VectorXd& b, Eigen::Index N, const std::vector<Eigen::Index>& runs = {});
 
 }  // namespace spml::diagnose_detail

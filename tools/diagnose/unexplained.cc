@@ -414,7 +414,7 @@ std::map<std::string, double> Diagnosis::resolution_floor(const SplitData& split
     const std::string where = opt_.data + ": resolution floor";
     const Eigen::VectorXd at_rest = stacked_base_regressor(*reg_, base_, S, *split.cols, where) * base_.model_values;
     // The edge rows, which the passes' start-up reaches, are left out.
-    const Eigen::Index edge = std::min<Eigen::Index>(L / 4, settle / keep + (split.sos.empty() ? 0 : settling_samples(split.sos)) + 2);
+    const Eigen::Index edge = std::min<Eigen::Index>(L / 4, settle / keep + (split.sos.empty() ? 0 : settling_samples(split.sos.sections)) + 2);
     for (const double offset : kGridOffsets) {
       RowMatrix E = S;
       for (size_t k = 0; k < joints.size(); ++k) {
