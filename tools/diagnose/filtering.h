@@ -31,15 +31,16 @@ struct FilterPlan {
   // also averages their errors.
   bool raw_differences = false;
   // A recorded low-pass the states went through as well: the most a second pass changes the
-  // fit split's (mean-free) torques on a joint, relative to their RMS, and whether that is more
-  // than kSecondPassChange, so that the smooth columns are left filtered once (prepare.cc,
-  // weigh_second_pass: ParallelFilter's probe).
-  double second_pass_change = 0;
+  // torques and the model's prediction alike on a joint (the square root of the inner product
+  // of the two changes, relative to the torques' mean-free RMS), the most it changes the
+  // prediction, and whether the smooth columns are left filtered once (prepare.cc,
+  // weigh_second_pass; ParallelFilter's probe).
+  double second_pass_change = 0, second_pass_model_change = 0;
   bool smooth_kept = false;
   std::string description;    // for report.json: what was done and why
 };
 
-constexpr double kSecondPassChange = 0.05;
+constexpr double kSecondPassChange = 0.05, kSecondPassShared = 0.2;
 
 // The plan for a dataset: its recorded `filter` attribute (the torques already went through
 // it: only the model's columns are filtered), else - when the accelerations hold noise above

@@ -1,6 +1,7 @@
 // Stage 2, prepare: one split made ready for the least squares - its joint columns, the stacked
 // base regressor, the stacked torques and what the model as given predicts.
 #include <algorithm>
+#include <cmath>
 
 #include "diagnosis.h"
 #include "spml/signal.h"
@@ -73,9 +74,9 @@ void Diagnosis::plan_parallel_filter() {
   weigh_second_pass();
   apply_filter(fit_);
   if (fit_.sos.probe_hz > 0)
-    filter_plan_.description += "; the states went through it too, and a second pass would change the torques by " +
-                                fmt(100 * filter_plan_.second_pass_change, 3) + " % of their RMS on a joint (more than " + fmt(100 * kSecondPassChange) +
-                                " %): only the columns that switch faster than its band (the power above " + fmt(fit_.sos.probe_hz, 4) + " Hz more than " +
+    filter_plan_.description += "; the states went through it too, and a second pass would change the torques and the model's "
+                                "prediction alike by " + fmt(100 * filter_plan_.second_pass_change, 3) + " % of their RMS on a joint (more than " + fmt(100 * kSecondPassChange) +
+                                " %, and most of what it changes in the prediction): only the columns that switch faster than its band (the power above " + fmt(fit_.sos.probe_hz, 4) + " Hz more than " +
                                 fmt(100 * kSwitchingShare) + " % of the power above half that) are filtered, the smooth ones left as the states made them";
   if (filter_plan_.source != FilterPlan::Source::none && fit_.sos.empty())
     filter_plan_.description += "; not applied: the cut-off (" + fmt(filter_plan_.lowpass.cutoff_hz) +
@@ -90,25 +91,47 @@ void Diagnosis::plan_parallel_filter() {
 // (`parameters` named) and `stick_slip` was named on two joints of four at 10 bits (3 of 3
 // seeds). The second pass also takes the encoders' noise out of that band, which the torques
 // never held (errors in variables): on a 10-bit log under a slow stepped sine, filtered once,
-// `parameters` was named on the MJCF that made it. The torques say which dominates: what a
-// second pass would change of them is the dynamics' own content in the band, whatever the
-// encoders add. Above kSecondPassChange of their RMS (7.7-8.4 % on the holds, at 10 bits as at
-// 14) the smooth columns are left as the states made them; below (0.05-0.5 % on the suite's
-// smooth excitations, 3.3 % on that stepped sine, where a 10-bit controller's chatter is most of
-// it) every column is filtered again, as every cause in the suite was judged.
+// `parameters` was named on the MJCF that made it. The dynamics' own content in the band is in
+// both the torques and the model's prediction from the states; the encoders' noise is only in
+// the prediction, the torque sensor's only in the torques. So the dynamics' part is measured by
+// the inner product of the two changes (independent noises average out of it), per joint, as
+// an RMS relative to the torques'. The smooth columns are left as the states made them where
+// that is more than kSecondPassChange on a joint (8 % on the holds, at 10 bits as at 14) and a
+// fair part of what a second pass changes in the prediction (over the joints, squared, more
+// than kSecondPassShared; the rest is noise a second pass would remove: 0.48-0.98 on the
+// holds, where a structured mismatch named causes and the noise named none). Below (0.05-0.5 %
+// on the suite's smooth excitations), or where the encoders' noise is nearly all of it (under
+// 0.01: a 10-bit stepped sine, 2-3 times the torques' RMS changed in the prediction and 3-6 %
+// shared, a controller's chatter following the quantized positions), every column is
+// filtered again, as before.
 void Diagnosis::weigh_second_pass() {
   if (filter_plan_.source != FilterPlan::Source::recorded || filter_plan_.raw_differences) return;
   const ParallelFilter every = plan_sections(filter_plan_, fit_.split);
   if (every.empty()) return;
-  Eigen::VectorXd b = fit_.b;   // mean-free per joint: a constant goes through a low-pass unchanged
-  for (Eigen::Index o = 0; o * fit_.N < b.size(); ++o) b.segment(o * fit_.N, fit_.N).array() -= b.segment(o * fit_.N, fit_.N).mean();
-  Eigen::VectorXd twice = b;
-  filter_stacked(every, twice, fit_.N, fit_.runs);
+  // A stacked series made mean-free per joint (a constant goes through a low-pass unchanged),
+  // and what a second pass changes of it.
+  auto centred = [&](Eigen::VectorXd x) {
+    for (Eigen::Index o = 0; o * fit_.N < x.size(); ++o) x.segment(o * fit_.N, fit_.N).array() -= x.segment(o * fit_.N, fit_.N).mean();
+    return x;
+  };
+  auto change = [&](const Eigen::VectorXd& x) {
+    Eigen::VectorXd twice = x;
+    filter_stacked(every, twice, fit_.N, fit_.runs);
+    return Eigen::VectorXd(twice - x);
+  };
+  const Eigen::VectorXd b = centred(fit_.b), torques = change(b), model = change(centred(fit_.base.times(base_.model_values)));
+  double signal = 0, model_change = 0;   // summed over the joints, each relative to its torques' RMS, squared
   for (Eigen::Index o = 0; o * fit_.N < b.size(); ++o) {
-    const double size = b.segment(o * fit_.N, fit_.N).norm();
-    if (size > 0) filter_plan_.second_pass_change = std::max(filter_plan_.second_pass_change, (twice - b).segment(o * fit_.N, fit_.N).norm() / size);
+    const double size = b.segment(o * fit_.N, fit_.N).squaredNorm();
+    if (!(size > 0)) continue;
+    const double shared = std::max(0.0, torques.segment(o * fit_.N, fit_.N).dot(model.segment(o * fit_.N, fit_.N))) / size,
+                 own = model.segment(o * fit_.N, fit_.N).squaredNorm() / size;
+    signal += shared;
+    model_change += own;
+    filter_plan_.second_pass_change = std::max(filter_plan_.second_pass_change, std::sqrt(shared));
+    filter_plan_.second_pass_model_change = std::max(filter_plan_.second_pass_model_change, std::sqrt(own));
   }
-  filter_plan_.smooth_kept = filter_plan_.second_pass_change > kSecondPassChange;
+  filter_plan_.smooth_kept = filter_plan_.second_pass_change > kSecondPassChange && signal > kSecondPassShared * model_change;
 }
 
 void Diagnosis::apply_filter(SplitData& d) const {

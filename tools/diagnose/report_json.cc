@@ -299,7 +299,7 @@ void Diagnosis::build_report(const std::string& out_dir) {
                           {"applied", !fit_.sos.empty()}, {"torques_filtered", !fit_.sos.empty() && filter_plan_.torques},
                           {"order", filter_plan_.lowpass.order}, {"cutoff_hz", filter_plan_.lowpass.cutoff_hz},
                           {"why", filter_plan_.description}, {"again_above_hz", fit_.sos.probe_hz},
-                          {"second_pass_change", filter_plan_.second_pass_change}};
+                          {"second_pass_change", filter_plan_.second_pass_change}, {"second_pass_model_change", filter_plan_.second_pass_model_change}};
   R["statistics"] = {{"standard_errors", "autocorrelation-robust (batch means, Andrews bandwidth)"},
                      {"equations", fit_.y0.size()}, {"parameters_n_eff", parameters_n_eff_},
                      {"parameters_delta_bic", parameters_delta_bic_}, {"parameters_delta_bic_per_joint", parameters_delta_bic_per_joint_}, {"parameters_contradicted", parameters_contradicted_},
