@@ -1645,6 +1645,108 @@ TEST(DiagnoseBeyond, AReferenceOfHoldsNamesNothingOnTheModelThatMadeIt) {
   }
 }
 
+// A twenty-sixth review's spatial arm: a yaw and two pitch joints.
+const char* kArm3Spatial = R"(<mujoco model="arm3s">
+  <compiler angle="radian" inertiafromgeom="false"/>
+  <option timestep="0.001" gravity="0 0 -9.81"><flag contact="disable"/></option>
+  <worldbody>
+    <body name="base" pos="0 0 0">
+      <joint name="yaw" type="hinge" axis="0 0 1" armature="0.3" damping="2.5"/>
+      <inertial pos="0 0 0.1" mass="3" diaginertia="0.05 0.05 0.03"/>
+      <body name="upper" pos="0 0 0.2">
+        <joint name="sh" type="hinge" axis="0 1 0" armature="0.2" damping="1.5"/>
+        <inertial pos="0.25 0 0" mass="2.2" diaginertia="0.004 0.05 0.05"/>
+        <body name="fore" pos="0.5 0 0">
+          <joint name="el" type="hinge" axis="0 1 0" armature="0.08" damping="0.6"/>
+          <inertial pos="0.18 0 0.01" mass="0.9" diaginertia="0.001 0.012 0.012"/>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+)";
+
+// Point-to-point moves for every joint of kArm3Spatial at once (a twenty-sixth review's
+// reference): from the set point before to {yaw, sh, el} between t0 and t1 with a trapezoidal
+// velocity (30 % of the move accelerating, 30 % braking), dwells of 0.3 s between; written
+// every millisecond.
+struct Move { double t0, t1, q[3]; };
+const Move kReviewMoves[] = {
+      {0.000, 1.165, 0.018124, 0.571492, -0.670662},
+      {1.466, 2.431, -0.197621, 0.362281, -0.520755},
+      {2.730, 3.853, 0.070306, 0.482658, -0.036554},
+      {4.153, 5.012, 0.462315, 0.580984, -0.208439},
+      {5.311, 6.493, 0.686442, -0.386769, 0.174163},
+      {6.793, 7.816, 0.708486, 0.198789, -0.586567},
+      {8.116, 9.015, -0.010208, 0.000271, 0.733732},
+      {9.314, 10.125, -0.441966, 0.026504, 0.225873},
+      {10.424, 11.588, 0.131225, -0.278600, 0.687640},
+      {11.888, 12.783, 0.281281, -0.028753, -0.452832},
+      {13.083, 14.099, 0.433009, -0.371054, -0.064134},
+      {14.398, 15.216, -0.526832, -0.334378, 0.740012},
+      {15.515, 16.646, -0.188333, 0.287368, -0.732851},
+      {16.947, 18.095, 0.059473, 0.384321, -0.358499},
+      {18.395, 19.221, -0.243130, 0.566928, -0.112864},
+      {19.521, 20.421, 0.729566, 0.483835, -0.167983},
+      {20.720, 21.505, 0.491277, -0.471034, -0.172498},
+      {21.805, 22.931, 0.668228, -0.319828, -0.674048},
+      {23.231, 24.303, 0.194845, -0.314994, 0.009429},
+      {24.604, 25.247, 0.320140, 0.032071, 0.327437},
+      {25.546, 26.199, 0.231704, -0.155597, -0.001106},
+      {26.500, 27.301, 0.214538, 0.081913, 0.187384},
+      {27.600, 28.239, -0.439773, -0.513715, -0.186723},
+      {28.538, 29.427, -0.620253, 0.201107, -0.020229},
+      {29.727, 30.627, 0.155945, 0.521854, 0.142184},
+      {30.927, 30.999, 0.135512, 0.513665, 0.130121}};
+
+std::string trapezoids(const std::filesystem::path& path, double duration) {
+  constexpr double acc = 0.3, vmax = 1 / (1 - acc);
+  auto profile = [&](double s) {
+    return s < acc ? 0.5 * vmax / acc * s * s : s < 1 - acc ? 0.5 * vmax * acc + vmax * (s - acc) : 1 - 0.5 * vmax / acc * (1 - s) * (1 - s);
+  };
+  std::ofstream out(path);
+  out.precision(9);
+  out << "t,q:yaw,q:sh,q:el\n";
+  double from[3] = {0, 0, 0};
+  size_t k = 0;
+  for (int i = 0; i * 0.001 <= duration + 1e-9; ++i) {
+    const double t = i * 0.001;
+    while (k + 1 < std::size(kReviewMoves) && t >= kReviewMoves[k + 1].t0) {
+      for (int j = 0; j < 3; ++j) from[j] = kReviewMoves[k].q[j];
+      ++k;
+    }
+    const Move& m = kReviewMoves[k];
+    const double p = t < m.t0 ? 0 : t <= m.t1 ? profile((t - m.t0) / (m.t1 - m.t0)) : 1;
+    out << t;
+    for (int j = 0; j < 3; ++j) out << "," << from[j] + (m.q[j] - from[j]) * p;
+    out << "\n";
+  }
+  return path.string();
+}
+
+// A delay is named only where the MJCF's own base parameters predict the held-out split
+// better with it too. A twenty-sixth review's model-exact 10-bit log under point-to-point
+// moves had -36 ms named (every joint agreeing, standard error 0.4 ms): beside refitted base
+// parameters, whose errors in variables the quantized accelerations make, it gained a tenth held
+// out; `parameters` was not named, and the model as given predicted every joint worse with the
+// shift (1.30 -> 1.36, 0.21 -> 0.23, 0.33 -> 0.36 of their torques).
+TEST(DiagnoseBeyond, ADelayTheMjcfPredictsWorseWithIsNotNamed) {
+  SPML_SKIP_UNDER_SANITIZERS();
+  const auto dir = test::temp_dir("trapezoid_delay");
+  Case c;
+  c.joints = 3;
+  c.user = c.truth = (dir / "given.xml").string();
+  std::ofstream(c.user) << kArm3Spatial;
+  Measurement m = issue_case_size();
+  m.bits = 10;
+  m.reference = trapezoids(dir / "moves.csv", m.duration);
+  const auto r = diagnose_case(c, measured(c, (dir / "moves.h5").string(), 2, m));
+  EXPECT_FALSE(r["delay"]["named"].get<bool>()) << r["delay"].dump();
+  EXPECT_FALSE(r["delay"]["corrected"].get<bool>()) << r["delay"].dump();
+  for (const auto& [joint, e] : r["final"]["rel_error_test"].items())
+    EXPECT_LE(e.get<double>(), r["baseline"]["rel_error_test"][joint].get<double>() * (1 + 1e-9)) << joint;
+}
+
 // An effect outside the vocabulary that the vocabulary takes most of is said to be so. A
 // nineteenth review's tendon spring from the world to the forearm of the 5-joint arm was read
 // as `parameters` (the upper arm written 12.45 kg for 4) and a spring on the base; they took
