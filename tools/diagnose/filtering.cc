@@ -175,7 +175,7 @@ bool switches(const ParallelFilter& f, const Eigen::MatrixXd& A, Eigen::Index c,
 }  // namespace
 
 // With a probe (FilterPlan::smooth_kept), a column that does not switch is left as it is
-// (prepare.cc, plan_parallel_filter says why); one that switches (sign(qd), a LuGre force, a
+// (prepare.cc, weigh_second_pass says why); one that switches (sign(qd), a LuGre force, a
 // ripple faster than the band) holds power far above the band, which the torques lost, and
 // goes through the low-pass again, as the discontinuous forces parallel filtering is for.
 void filter_stacked(const ParallelFilter& f, Eigen::MatrixXd& A, Eigen::Index N, const std::vector<Eigen::Index>& runs) {

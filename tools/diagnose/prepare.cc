@@ -76,7 +76,7 @@ void Diagnosis::plan_parallel_filter() {
   if (fit_.sos.probe_hz > 0)
     filter_plan_.description += "; the states went through it too, and a second pass would change the torques and the model's "
                                 "prediction alike by " + fmt(100 * filter_plan_.second_pass_change, 3) + " % of their RMS on a joint (more than " + fmt(100 * kSecondPassChange) +
-                                " %, and most of what it changes in the prediction): only the columns that switch faster than its band (the power above " + fmt(fit_.sos.probe_hz, 4) + " Hz more than " +
+                                " %, and a fair part of what it changes in the prediction): only the columns that switch faster than its band (the power above " + fmt(fit_.sos.probe_hz, 4) + " Hz more than " +
                                 fmt(100 * kSwitchingShare) + " % of the power above half that) are filtered, the smooth ones left as the states made them";
   if (filter_plan_.source != FilterPlan::Source::none && fit_.sos.empty())
     filter_plan_.description += "; not applied: the cut-off (" + fmt(filter_plan_.lowpass.cutoff_hz) +
