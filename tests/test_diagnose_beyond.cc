@@ -49,6 +49,20 @@ Case make_case(const std::filesystem::path& dir, const std::string& tag, unsigne
   return c;
 }
 
+// A model text of `joints` joints written to dir/given.xml, both what the user has and what
+// made the data (`truth`: another model text for the data, when given).
+Case given_case(const std::filesystem::path& dir, const std::string& xml, int joints, const std::string& truth = "") {
+  Case c;
+  c.joints = joints;
+  c.user = c.truth = (dir / "given.xml").string();
+  std::ofstream(c.user) << xml;
+  if (!truth.empty()) {
+    c.truth = (dir / "true.xml").string();
+    std::ofstream(c.truth) << truth;
+  }
+  return c;
+}
+
 // How one draw is measured: 10 s at 1 kHz under the PD controller, torque noise (a fraction
 // of each joint's RMS torque), encoders of `bits`; the torque log delayed by `delay_samples`
 // ticks (it reads the torque of that many ticks before); imported with a low-pass, derived,
@@ -1401,17 +1415,7 @@ const char* kArm7 = R"(<mujoco model="arm7">
 )";
 
 // kArm7 as given (wrist damping 0.01) in `dir`; the true model `truth` beside it, or the same file.
-Case arm7_case(const std::filesystem::path& dir, const std::string& truth = "") {
-  Case c;
-  c.joints = 7;
-  c.user = c.truth = (dir / "given.xml").string();
-  std::ofstream(c.user) << filled(kArm7, "DAMPING", "0.01");
-  if (!truth.empty()) {
-    c.truth = (dir / "true.xml").string();
-    std::ofstream(c.truth) << truth;
-  }
-  return c;
-}
+Case arm7_case(const std::filesystem::path& dir, const std::string& truth = "") { return given_case(dir, filled(kArm7, "DAMPING", "0.01"), 7, truth); }
 
 TEST(DiagnoseBeyond, ACauseStandsOnItsOwnCoefficients) {
   const auto dir = test::temp_dir("own");
@@ -1563,10 +1567,7 @@ std::string stepped_sine(const std::filesystem::path& path, const std::vector<do
 // damping on pitch1, whose torque follows the excitation's band, is still `unexplained` there.
 TEST(DiagnoseBeyond, AGpOnTheEncodersFloorIsNoEffect) {
   const auto dir = test::temp_dir("floor_gp");
-  Case c;
-  c.joints = 4;
-  c.user = c.truth = (dir / "given.xml").string();
-  std::ofstream(c.user) << kArmYawSlide;
+  Case c = given_case(dir, kArmYawSlide, 4);
   Measurement m = issue_case_size();
   m.bits = 10;
   m.reference = stepped_sine(dir / "stepped.csv", {0.22484809, 0.10401516, 0.18756436, 0.16597457, 0.33016917},
@@ -1626,10 +1627,7 @@ std::string holds(const std::filesystem::path& path, double duration) {
 TEST(DiagnoseBeyond, AReferenceOfHoldsNamesNothingOnTheModelThatMadeIt) {
   SPML_SKIP_UNDER_SANITIZERS();
   const auto dir = test::temp_dir("holds");
-  Case c;
-  c.joints = 4;
-  c.user = c.truth = (dir / "given.xml").string();
-  std::ofstream(c.user) << kArmYawSlide;
+  Case c = given_case(dir, kArmYawSlide, 4);
   Measurement m = issue_case_size();
   m.reference = holds(dir / "holds.csv", m.duration);
   for (const int bits : {14, 10}) {
@@ -1736,10 +1734,7 @@ std::string trapezoids(const std::filesystem::path& path, double duration) {
 TEST(DiagnoseBeyond, ADelayIsJudgedBesideTheBaseParametersThatPredictBetter) {
   SPML_SKIP_UNDER_SANITIZERS();
   const auto dir = test::temp_dir("trapezoid_delay");
-  Case c;
-  c.joints = 3;
-  c.user = c.truth = (dir / "given.xml").string();
-  std::ofstream(c.user) << kArm3Spatial;
+  Case c = given_case(dir, kArm3Spatial, 3);
   Measurement m = issue_case_size();
   m.bits = 10;
   m.reference = trapezoids(dir / "moves.csv", m.duration);
@@ -1749,11 +1744,9 @@ TEST(DiagnoseBeyond, ADelayIsJudgedBesideTheBaseParametersThatPredictBetter) {
   for (const auto& [joint, e] : r["final"]["rel_error_test"].items())
     EXPECT_LE(e.get<double>(), r["baseline"]["rel_error_test"][joint].get<double>() * (1 + 1e-9)) << joint;
   // A real delay beside a 1.5 kg payload the MJCF lacks, default excitation.
-  Case heavy = c;
-  heavy.truth = (dir / "heavy.xml").string();
-  std::ofstream(heavy.truth) << filled(kArm3Spatial, R"(<inertial pos="0.18 0 0.01" mass="0.9" diaginertia="0.001 0.012 0.012"/>)",
+  const Case heavy = given_case(dir, kArm3Spatial, 3, filled(kArm3Spatial, R"(<inertial pos="0.18 0 0.01" mass="0.9" diaginertia="0.001 0.012 0.012"/>)",
                                        R"(<inertial pos="0.18 0 0.01" mass="0.9" diaginertia="0.001 0.012 0.012"/>
-          <body name="payload" pos="0.36 0 0"><inertial pos="0 0 0" mass="1.5" diaginertia="0.002 0.002 0.002"/></body>)");
+          <body name="payload" pos="0.36 0 0"><inertial pos="0 0 0" mass="1.5" diaginertia="0.002 0.002 0.002"/></body>)"));
   Measurement d = issue_case_size();
   d.bits = 16;
   d.delay_samples = 5;

@@ -432,12 +432,23 @@ void Diagnosis::delay_decide(double d, const ShiftSlope& at, const std::function
   const std::vector<BlockColumns> nuis_test = delay_nuisance(test_);
   const Eigen::VectorXd wt = sliding_rows(test_);
   const Eigen::VectorXd b_fit = net_of_frictionloss(fit_).cwiseProduct(wf), b_test = net_of_frictionloss(test_).cwiseProduct(wt);
-  auto test_rss = [&](double dd) {
+  // `mjcf`: the MJCF's own base parameters, the nuisance alone refitted (below).
+  auto test_rss = [&](double dd, bool mjcf) {
     const double ht = uniform_step(test_);
-    std::vector<BlockColumns> F{shifted_block(fit_.base, dd, h, wf)}, T{shifted_block(test_.base, dd, ht, wt)};
+    const BlockColumns Bf = shifted_block(fit_.base, dd, h, wf), Bt = shifted_block(test_.base, dd, ht, wt);
+    Eigen::VectorXd yf = b_fit, yt = b_test;
+    std::vector<BlockColumns> F, T;
+    if (mjcf) {
+      yf -= Bf.times(base_.model_values);
+      yt -= Bt.times(base_.model_values);
+    } else {
+      F.push_back(Bf);
+      T.push_back(Bt);
+    }
     for (size_t b = 0; b < nuis_fit.size(); ++b) F.push_back(shifted_block(nuis_fit[b], dd, h, wf)), T.push_back(shifted_block(nuis_test[b], dd, ht, wt));
-    const Fit f = fit_blocks(pointers(F), b_fit, false);
-    return (b_test - predict_blocks(pointers(T), f.coef, test_.y0.size())).squaredNorm();
+    if (F.empty()) return yt.squaredNorm();
+    const Fit f = fit_blocks(pointers(F), yf, false);
+    return (yt - predict_blocks(pointers(T), f.coef, test_.y0.size())).squaredNorm();
   };
   // A lead of half a sample is the hold itself (see kMinDelay): at 200 Hz it is 2.5 ms, above
   // kMinDelay, and clean simulated logs had it named. Offsets near it are not named either.
@@ -454,20 +465,11 @@ void Diagnosis::delay_decide(double d, const ShiftSlope& at, const std::function
   // predicted worse than the MJCF's (4686); with the MJCF's the shift made it 7273, and named,
   // every joint was predicted worse. Where the MJCF is off (a payload: 92 999 held out against
   // the refit's 96) the refitted test stands, and a real delay with it.
-  auto test_rss_given = [&](double dd) {
-    const double ht = uniform_step(test_);
-    const BlockColumns Bf = shifted_block(fit_.base, dd, h, wf), Bt = shifted_block(test_.base, dd, ht, wt);
-    const Eigen::VectorXd yf = b_fit - Bf.times(base_.model_values), yt = b_test - Bt.times(base_.model_values);
-    if (nuis_fit.empty()) return yt.squaredNorm();
-    std::vector<BlockColumns> F, T;
-    for (size_t b = 0; b < nuis_fit.size(); ++b) F.push_back(shifted_block(nuis_fit[b], dd, h, wf)), T.push_back(shifted_block(nuis_test[b], dd, ht, wt));
-    const Fit f = fit_blocks(pointers(F), yf, false);
-    return (yt - predict_blocks(pointers(T), f.coef, test_.y0.size())).squaredNorm();
-  };
-  const double refit_0 = test_rss(0), given_0 = test_rss_given(0);
-  const bool mjcf = given_0 < refit_0;
-  const bool passes = evidence && gains_on_test(mjcf ? given_0 : refit_0, mjcf ? test_rss_given(d) : test_rss(d),
-                                                std::max(opt_.min_gain, kMinDelayGain), rss_floor(test_.b));
+  const bool passes = evidence && [&] {
+    const double refit_0 = test_rss(0, false), given_0 = test_rss(0, true);
+    const bool mjcf = given_0 < refit_0;
+    return gains_on_test(mjcf ? given_0 : refit_0, test_rss(d, mjcf), std::max(opt_.min_gain, kMinDelayGain), rss_floor(test_.b));
+  }();
   // Raw differences (no low-pass below 0.4 of the rate smoothed them): shifting the columns
   // interpolates, and so averages, their errors, which lowers the residual by itself -
   // spurious offsets of a few ms on clean RealisticDraws (-3.7 ms, ΔBIC 2700, after an
