@@ -162,6 +162,7 @@ struct StatefulSpace {
 
 struct DelayResult {
   double seconds = 0, stderr_ = std::numeric_limits<double>::infinity(), delta_bic = 0, range = 0;
+  double band_hz = 0;        // the search's low-pass (search_band; 0: the data's whole band)
   bool named = false;
   bool withheld = false;   // evidence and held-out gain pass, but the data cannot be trusted with it (raw differences)
   bool corrected = false;  // not named (an offset of 0.2-1 ms, the logger's half tick), but resolved and corrected
@@ -179,6 +180,13 @@ struct DelayResult {
   std::vector<std::pair<std::string, std::pair<double, double>>> own;   // each joint's own offset and standard error (estimate_delay) ...
   double own_about = 0;                                                   // ... to first order about this first estimate
   std::vector<std::string> left_out; // joints whose own offset disagreed, left out of the search
+};
+
+// The delay search's signals on a split, through the search's band (delay.cc, delay_signals).
+struct DelaySignals {
+  BlockColumns base;
+  std::vector<BlockColumns> nuisance;
+  Eigen::VectorXd torques;   // net of MuJoCo's frictionloss correction
 };
 
 // The delay search's stacked residual at an offset and its derivative there (delay.cc).
@@ -368,13 +376,16 @@ class Diagnosis {
   ShiftSlope shift_slope(double d, const std::function<Eigen::VectorXd(double)>& projected) const;
   std::vector<std::pair<double, double>> offsets_per_output(double d, const ShiftSlope& at) const;
   void delay_decide(double d, const ShiftSlope& at, const std::function<Eigen::VectorXd(double)>& projected,
-                    const std::vector<BlockColumns>& nuis_fit, const Eigen::VectorXd& wf);
+                    const DelaySignals& fit, const Eigen::VectorXd& wf);
+  double search_band() const;
+  ParallelFilter search_filter(const SplitData& s) const;
+  DelaySignals delay_signals(const SplitData& s) const;
   double uniform_step(const SplitData& s) const;
   Eigen::VectorXd targets_at(const SplitData& s, double d) const;
   Eigen::VectorXd net_of_frictionloss(const SplitData& s) const;
   BlockColumns coulomb_nuisance(const SplitData& s) const;
   std::vector<BlockColumns> delay_nuisance(const SplitData& s) const;
-  Eigen::VectorXd sliding_rows(const SplitData& s) const;
+  Eigen::VectorXd sliding_rows(const SplitData& s, double band_hz = 0) const;
   BlockColumns offset_column(const SplitData& s) const;
   OffsetBeside offset_beside(const std::vector<int>& stateful, DelayResult& first);
   void choose(const Selection& fresh);
@@ -452,6 +463,12 @@ class Diagnosis {
   nlohmann::json unexplained_joint(size_t o, const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test, std::ostringstream& csv) const;
   nlohmann::json unexplained(const std::string& out_dir, const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test) const;
   nlohmann::json left_unexplained(nlohmann::json& report, const Eigen::VectorXd& r_fit, const Eigen::VectorXd& r_test) const;
+  // quantization.cc: the positions' quantization replayed through the import's chain
+  struct Requantized {
+    std::vector<RowMatrix> states;   // per grid offset: the split's states with a fresh quantization error
+    Eigen::Index edge_rows = 0;      // rows at each record's ends the chain's start-up reaches
+  };
+  Requantized requantized(const SplitData& split, const std::vector<double>& offsets) const;
   std::map<std::string, double> resolution_floor(const SplitData& split) const;
   bool residual_at_floor(const std::string& joint, const Eigen::VectorXd& r) const;
   double low_band_share(const Eigen::VectorXd& r) const;
