@@ -77,6 +77,7 @@ struct Measurement {
   double duration = 10;   // seconds logged (SPML_BEYOND_DURATION)
   double f_high = 0;   // the excitation's top frequency [Hz] (0: the default band, 0.1-1 Hz; its bottom stays 0.1 Hz)
   std::string reference;   // a CSV of q:<joint> against t the controller tracks instead (ExcitationOptions "file:")
+  std::string kind;        // the excitation's kind where not the default (ExcitationOptions: "chirp")
   // A torque outside the plugin vocabulary, added to the logged torque of joint `extra_joint`
   // as a function of its true position and velocity: a robot with that force needs exactly
   // this much more torque along the motion it made (inverse dynamics is additive).
@@ -96,6 +97,7 @@ std::string measured(const Case& c, const std::string& path, unsigned seed, cons
   o.seed = seed;
   o.excitation.seed = seed + 17;
   if (m.f_high > 0) o.excitation.f_high = m.f_high, o.excitation.f_low = std::min(o.excitation.f_low, 0.5 * m.f_high);
+  if (!m.kind.empty()) o.excitation.kind = m.kind;
   if (!m.reference.empty()) o.excitation.kind = "file:" + m.reference;
   MeasuredRun run = simulate_measured(c.truth, o);
   if (m.extra && m.extra_joint >= 0)
@@ -1755,6 +1757,31 @@ TEST(DiagnoseBeyond, ADelayIsJudgedBesideTheBaseParametersThatPredictBetter) {
   EXPECT_NEAR(h["delay"]["seconds"].get<double>(), 0.005, 0.001) << h["delay"].dump();
 }
 
+// A twenty-seventh review's 4-joint arm: a yaw, two pitch joints and a roll at the wrist.
+const char* kArm4Chirped = R"(<mujoco model="arm4">
+ <compiler angle="radian" inertiafromgeom="false"/>
+ <option timestep="0.001" gravity="0 0 -9.81"><flag contact="disable"/></option>
+ <worldbody>
+  <body name="base" pos="0 0 0">
+   <joint name="j1" type="hinge" axis="0 0 1" armature="0.25" damping="1.8"/>
+   <inertial pos="0.02 0 0.12" mass="4.1" diaginertia="0.07 0.06 0.035"/>
+   <body name="upper" pos="0 0 0.28">
+    <joint name="j2" type="hinge" axis="0 1 0" armature="0.18" damping="1.2"/>
+    <inertial pos="0.18 0.01 0" mass="2.7" diaginertia="0.006 0.038 0.04"/>
+    <body name="fore" pos="0.36 0 0">
+     <joint name="j3" type="hinge" axis="0 1 0" armature="0.09" damping="0.7"/>
+     <inertial pos="0.14 0 0.01" mass="1.3" diaginertia="0.002 0.012 0.013"/>
+     <body name="wrist" pos="0.3 0 0">
+      <joint name="j4" type="hinge" axis="1 0 0" armature="0.03" damping="0.25"/>
+      <inertial pos="0.04 0.02 0.0" mass="0.6" diaginertia="0.0015 0.001 0.0012"/>
+     </body>
+    </body>
+   </body>
+  </body>
+ </worldbody>
+</mujoco>
+)";
+
 // Coarse encoders' errors in the columns pull the delay search's least-squares minimum: a
 // twenty-sixth review's 12-bit logs of this arm read -3.6 to -7.9 ms with no delay, and a real
 // 5 ms delay -3.1 ms, not named, with `parameters` beside the exact model. The search now runs
@@ -1779,6 +1806,25 @@ TEST(DiagnoseBeyond, CoarseEncodersDoNotPullTheDelay) {
   EXPECT_TRUE(late["delay"]["named"].get<bool>()) << late["delay"].dump();
   EXPECT_NEAR(late["delay"]["seconds"].get<double>(), 0.005, 0.001) << late["delay"].dump();
   EXPECT_EQ(named(late), std::vector<std::string>{"delay"}) << joined(named(late));
+  // A twenty-seventh review's 4-joint arm under a chirp: the delay, found at 4.54 ms, was given
+  // up by the comparison with the causes chosen on the data as measured (fitted over the whole
+  // band, scored below the search's) and `parameters` written on the exact model, 2.67 % held
+  // out where the correction leaves 1.74 and the log without the delay 1.73.
+  std::filesystem::create_directories(dir / "arm4");
+  const Case arm4 = given_case(dir / "arm4", kArm4Chirped, 4);
+  Measurement ch = issue_case_size();
+  ch.bits = 12;
+  ch.kind = "chirp";
+  const auto on_time = diagnose_case(arm4, measured(arm4, (dir / "chirp.h5").string(), 1, ch));
+  ch.delay_samples = 5;
+  const auto chirp = diagnose_case(arm4, measured(arm4, (dir / "chirp_late.h5").string(), 1, ch));
+  std::cout << "  chirp: delay " << chirp["delay"]["seconds"].get<double>() << " s, named " << joined(named(chirp)) << ", held out "
+            << chirp["final"]["rel_error_test_all"].get<double>() << " (on time: " << on_time["final"]["rel_error_test_all"].get<double>() << ")\n";
+  EXPECT_TRUE(named(on_time).empty()) << joined(named(on_time));
+  EXPECT_TRUE(chirp["delay"]["named"].get<bool>()) << chirp["delay"].dump();
+  EXPECT_NEAR(chirp["delay"]["seconds"].get<double>(), 0.005, 0.001) << chirp["delay"].dump();
+  EXPECT_EQ(named(chirp), std::vector<std::string>{"delay"}) << joined(named(chirp));
+  EXPECT_LE(chirp["final"]["rel_error_test_all"].get<double>(), 1.05 * on_time["final"]["rel_error_test_all"].get<double>());
 }
 
 // An effect outside the vocabulary that the vocabulary takes most of is said to be so. A

@@ -253,6 +253,25 @@ Eigen::VectorXd Diagnosis::sliding_rows(const SplitData& s, double band_hz) cons
       w.segment(o * s.N + from, to - from + 1).setZero();
     }
   }
+  // Below a band of its own (search_band) each record's first and last rows hold the start-up of
+  // the filters that ran on the split alone (diagnose's parallel filter, then the band's) and
+  // its low cut-off rings for long: on a review's 10-bit log, 2.5 Hz below a 20 Hz import, the
+  // test split's first 0.65 s held 75 of its 90 held-out residual, and a 10 ms delay, read 8.8
+  // ms, failed the held-out test. Two periods of each cut-off are out (the slowest pole pair
+  // rings down to 1 % in 1.9 of the band's periods).
+  if (band_hz > 0) {
+    const double fc = filter_plan_.source != FilterPlan::Source::none && !s.sos.empty() ? filter_plan_.lowpass.cutoff_hz : 0;
+    const auto edge = static_cast<Eigen::Index>(std::ceil((2 / band_hz + (fc > 0 ? 2 / fc : 0)) / h));
+    std::vector<Eigen::Index> bounds{0};
+    bounds.insert(bounds.end(), s.runs.begin(), s.runs.end());
+    bounds.push_back(s.N);
+    for (Eigen::Index o = 0; o < O; ++o)
+      for (size_t r = 0; r + 1 < bounds.size(); ++r) {
+        const Eigen::Index len = std::min(edge, (bounds[r + 1] - bounds[r]) / 2);
+        w.segment(o * s.N + bounds[r], len).setZero();
+        w.segment(o * s.N + bounds[r + 1] - len, len).setZero();
+      }
+  }
   return w;
 }
 
@@ -531,9 +550,13 @@ void Diagnosis::delay_decide(double d, const ShiftSlope& at, const std::function
     const Fit f = fit_blocks(pointers(F), yf, false);
     return (yt - predict_blocks(pointers(T), f.coef, test_.y0.size())).squaredNorm();
   };
-  // A lead of half a sample is the hold itself (see kMinDelay): at 200 Hz it is 2.5 ms, above
-  // kMinDelay, and clean simulated logs had it named. Offsets near it are not named either.
-  const bool hold = std::fabs(d + 0.5 * h) < kMinDelay;
+  // A lead of half the logger's tick is the hold itself (see kMinDelay): at 200 Hz it is 2.5 ms,
+  // above kMinDelay, and clean simulated logs had it named. Offsets near it are not named
+  // either. The tick is the log's own, before the import decimated it: the rows of a 1 kHz log
+  // kept at 200 Hz hold 0.5 ms, and a review's 10-bit reading of -1.79 ms was excused as the
+  // 2.5 ms of a 200 Hz hold.
+  const double tick = h / decimated_by(ds_);
+  const bool hold = std::fabs(d + 0.5 * tick) < kMinDelay;
   const bool evidence = delay_.delta_bic > opt_.bic_threshold && std::fabs(d) > 3 * delay_.stderr_ && std::fabs(d) >= kMinDelay && !hold;
   // A delay worth correcting removes a tenth of the held-out residual: on raw differences of
   // coarse encoders (16 bit, 2 % torque noise) the errors in the regressors let a spurious
@@ -583,7 +606,7 @@ void Diagnosis::delay_decide(double d, const ShiftSlope& at, const std::function
     // (A lead of half a tick is a held command's normal; a lag below the floor is not that.)
     delay_.why = std::fabs(d) < kMinDelay ? "the offset is below " + fmt(kMinDelay) + " s, the least a delay is named at" +
                                                 (d < 0 ? std::string(" (torques that lead by half a tick are a held command's normal)") : std::string()) + ": not named"
-                 : hold ? "the torques lead the states by half a sample (" + fmt(0.5 * h) + " s), as a torque held over each sample does: "
+                 : hold ? "the torques lead the states by half a sample (" + fmt(0.5 * tick) + " s), as a torque held over each sample does: "
                           "not named"
                         : "no offset between torques and states passes the evidence and held-out tests";
     // The logger's own offset is no fault, but left in the data it biases the fit: states half
