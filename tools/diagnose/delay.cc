@@ -262,9 +262,7 @@ Eigen::VectorXd Diagnosis::sliding_rows(const SplitData& s, double band_hz) cons
   if (band_hz > 0) {
     const double fc = filter_plan_.source != FilterPlan::Source::none && !s.sos.empty() ? filter_plan_.lowpass.cutoff_hz : 0;
     const auto edge = static_cast<Eigen::Index>(std::ceil((2 / band_hz + (fc > 0 ? 2 / fc : 0)) / h));
-    std::vector<Eigen::Index> bounds{0};
-    bounds.insert(bounds.end(), s.runs.begin(), s.runs.end());
-    bounds.push_back(s.N);
+    const std::vector<Eigen::Index> bounds = segment_bounds(s.N, s.runs);
     for (Eigen::Index o = 0; o < O; ++o)
       for (size_t r = 0; r + 1 < bounds.size(); ++r) {
         const Eigen::Index len = std::min(edge, (bounds[r + 1] - bounds[r]) / 2);

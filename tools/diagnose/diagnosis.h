@@ -332,9 +332,7 @@ class Diagnosis {
   double search_shape(Candidate& c, const Fit& current);
   // estimate.cc
   std::vector<const BlockColumns*> blocks(const std::vector<int>& causes, bool base_free) const;
-  // `band`: fitted below it, columns and targets alike (delay.cc, search_band).
-  Fit refit(const std::vector<int>& causes, bool base_free, bool robust = false, const Eigen::VectorXd* weights = nullptr,
-            const ParallelFilter* band = nullptr) const;
+  Fit refit(const std::vector<int>& causes, bool base_free, bool robust = false, const Eigen::VectorXd* weights = nullptr) const;
   Eigen::VectorXd residual_on(const SplitData& s, const std::vector<int>& causes, bool base_free, const Fit& f) const;
   double rss_on(const Eigen::VectorXd& r, const std::vector<int>& outputs, Eigen::Index N) const;
   std::vector<int> outputs_of(int candidate) const;

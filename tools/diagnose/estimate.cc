@@ -17,20 +17,10 @@ std::vector<const BlockColumns*> Diagnosis::blocks(const std::vector<int>& cause
 // rows weighted so (weighted least squares: the fit of one noise variance per joint, where the
 // unweighted one leaves a light joint the large joints' misfit), the residual returned in the
 // targets' own units.
-Fit Diagnosis::refit(const std::vector<int>& causes, bool base_free, bool robust, const Eigen::VectorXd* weights, const ParallelFilter* band) const {
-  TakenBase t = taken_base(causes);
+Fit Diagnosis::refit(const std::vector<int>& causes, bool base_free, bool robust, const Eigen::VectorXd* weights) const {
+  const TakenBase t = taken_base(causes);
   std::vector<const BlockColumns*> with = blocks(causes, base_free);
   if (base_free && t.base) with[0] = &*t.base;   // free, the base parameters still hold no taken level
-  std::vector<BlockColumns> banded;   // the columns and targets below `band` (the residual then is too)
-  if (band && !band->empty()) {
-    banded.reserve(with.size());
-    for (const BlockColumns* b : with) {
-      banded.push_back(*b);
-      for (auto& part : banded.back().parts) filter_stacked(*band, part, fit_.N, fit_.runs);
-    }
-    for (size_t k = 0; k < with.size(); ++k) with[k] = &banded[k];
-    filter_stacked(*band, t.y, fit_.N, fit_.runs);
-  }
   if (!weights) return fit_blocks(with, t.y, true, robust ? fit_.N : 0);
   std::vector<BlockColumns> scaled;
   scaled.reserve(with.size());

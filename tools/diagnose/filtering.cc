@@ -146,15 +146,14 @@ ParallelFilter plan_sections(const FilterPlan& plan, const Split& s) {
   return f;
 }
 
-namespace {
-
-// The first rows of one output's segments (runs split it; the last bound is N).
 std::vector<Eigen::Index> segment_bounds(Eigen::Index N, const std::vector<Eigen::Index>& runs) {
   std::vector<Eigen::Index> bounds{0};
   bounds.insert(bounds.end(), runs.begin(), runs.end());
   bounds.push_back(N);
   return bounds;
 }
+
+namespace {
 
 // Whether column c switches faster than the states' band: the power above the probe more than
 // kSwitchingShare of the power above half of it (per segment; none above half: smooth).

@@ -75,6 +75,9 @@ struct ParallelFilter {
 // the cut-off lies at or above 0.4 of its sampling rate: nothing left to filter).
 ParallelFilter plan_sections(const FilterPlan& plan, const Split& s);
 
+// The first rows of one output's records (`runs`: the first rows after the first), and N last.
+std::vector<Eigen::Index> segment_bounds(Eigen::Index N, const std::vector<Eigen::Index>& runs);
+
 // Filters the columns of a stacked matrix (rows o*N .. o*N+N-1 are output o) segment-wise;
 // `runs` (first rows of the runs after the first, when several records are stacked) splits each
 // output's rows further, so that no filter runs across the junction of two records. With a

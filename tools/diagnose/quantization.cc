@@ -45,9 +45,7 @@ Diagnosis::Requantized Diagnosis::requantized(const SplitData& split, const std:
     if (f && f->cutoff_hz < 0.5 * raw_rate) settle += settling_samples(butterworth_lowpass(f->order, f->cutoff_hz, raw_rate));
   out.edge_rows = settle / keep + (split.sos.empty() ? 0 : settling_samples(split.sos.sections)) + 2;
   const std::vector<std::string>& joints = reg_->joint_names();
-  std::vector<Eigen::Index> bounds{0};
-  bounds.insert(bounds.end(), split.runs.begin(), split.runs.end());
-  bounds.push_back(X.rows());
+  const std::vector<Eigen::Index> bounds = segment_bounds(X.rows(), split.runs);
   for (const double offset : offsets) {
     RowMatrix E = X;
     for (size_t r = 0; r + 1 < bounds.size(); ++r) {
@@ -94,9 +92,7 @@ std::map<std::string, double> Diagnosis::resolution_floor(const SplitData& split
   const auto O = static_cast<Eigen::Index>(out_joints_.size());
   Eigen::VectorXd sum = Eigen::VectorXd::Zero(O);
   double rows = 0;
-  std::vector<Eigen::Index> bounds{0};
-  bounds.insert(bounds.end(), split.runs.begin(), split.runs.end());
-  bounds.push_back(X.rows());
+  const std::vector<Eigen::Index> bounds = segment_bounds(X.rows(), split.runs);
   const std::string where = opt_.data + ": resolution floor";
   for (size_t r = 0; r + 1 < bounds.size(); ++r) {
     const Eigen::Index b = bounds[r], L = bounds[r + 1] - bounds[r];
