@@ -78,6 +78,7 @@ struct Measurement {
   double f_high = 0;   // the excitation's top frequency [Hz] (0: the default band, 0.1-1 Hz; its bottom stays 0.1 Hz)
   std::string reference;   // a CSV of q:<joint> against t the controller tracks instead (ExcitationOptions "file:")
   std::string kind;        // the excitation's kind where not the default (ExcitationOptions: "chirp")
+  int excitation_seed = -1;   // the excitation's seed (-1: the draw's seed + 17; `spml generate --seed S` uses S)
   // A torque outside the plugin vocabulary, added to the logged torque of joint `extra_joint`
   // as a function of its true position and velocity: a robot with that force needs exactly
   // this much more torque along the motion it made (inverse dynamics is additive).
@@ -95,7 +96,7 @@ std::string measured(const Case& c, const std::string& path, unsigned seed, cons
   o.torque_noise = m.torque_noise;
   o.encoder_bits = m.bits;
   o.seed = seed;
-  o.excitation.seed = seed + 17;
+  o.excitation.seed = m.excitation_seed >= 0 ? static_cast<unsigned>(m.excitation_seed) : seed + 17;
   if (m.f_high > 0) o.excitation.f_high = m.f_high, o.excitation.f_low = std::min(o.excitation.f_low, 0.5 * m.f_high);
   if (!m.kind.empty()) o.excitation.kind = m.kind;
   if (!m.reference.empty()) o.excitation.kind = "file:" + m.reference;
@@ -144,6 +145,15 @@ std::vector<std::string> named(const nlohmann::json& r) {
   std::vector<std::string> out;
   for (const auto& c : r["causes"])
     if (!c.contains("superseded_by")) out.push_back(c["effect"].get<std::string>() + (c["effect"] == "delay" || c["effect"] == "parameters" ? "" : "@" + c["joints"][0].get<std::string>()));
+  return out;
+}
+
+// The causes extended.xml holds: named, and not rejected in simulation.
+std::vector<std::string> written(const nlohmann::json& r) {
+  std::vector<std::string> out;
+  for (const auto& c : r["causes"])
+    if (!c.contains("superseded_by") && !c.contains("rejected"))
+      out.push_back(c["effect"].get<std::string>() + (c["effect"] == "delay" || c["effect"] == "parameters" ? "" : "@" + c["joints"][0].get<std::string>()));
   return out;
 }
 
@@ -1825,6 +1835,111 @@ TEST(DiagnoseBeyond, CoarseEncodersDoNotPullTheDelay) {
   EXPECT_NEAR(chirp["delay"]["seconds"].get<double>(), 0.005, 0.001) << chirp["delay"].dump();
   EXPECT_EQ(named(chirp), std::vector<std::string>{"delay"}) << joined(named(chirp));
   EXPECT_LE(chirp["final"]["rel_error_test_all"].get<double>(), 1.05 * on_time["final"]["rel_error_test_all"].get<double>());
+}
+
+// A vertical slide that carries most of the torque beside two light hinges (a twenty-eighth
+// review's): the pooled held-out sum weighs the joints by their torques, and the gain a delay
+// makes on the hinges was below a tenth of it - a 4 ms delay was lost at every bit depth and
+// `parameters` (each damping 4-5 % high) named in its place. The delay's held-out test now also
+// asks one noise variance per joint, as the base parameters' does.
+const char* kSlideAndHinges = R"(<mujoco model="slide3">
+ <compiler angle="radian" inertiafromgeom="false"/>
+ <option timestep="0.001" gravity="0 0 -9.81"><flag contact="disable"/></option>
+ <worldbody>
+  <body name="car">
+   <joint name="z" type="slide" axis="0 0 1" armature="5" damping="20"/>
+   <inertial pos="0 0 0" mass="6" diaginertia="0.1 0.1 0.1"/>
+   <body name="u" pos="0 0 0.1">
+    <joint name="y" type="hinge" axis="0 0 1" armature="0.4" damping="1"/>
+    <inertial pos="0.15 0 0" mass="2" diaginertia="0.005 0.02 0.02"/>
+    <body name="f" pos="0.3 0 0">
+     <joint name="p" type="hinge" axis="0 1 0" armature="0.3" damping="0.7"/>
+     <inertial pos="0.1 0 0" mass="0.8" diaginertia="0.001 0.006 0.006"/>
+    </body>
+   </body>
+  </body>
+ </worldbody>
+</mujoco>
+)";
+
+TEST(DiagnoseBeyond, ADelayOnLightJointsBesideAHeavySlideIsNamed) {
+  SPML_SKIP_UNDER_SANITIZERS();
+  const auto dir = test::temp_dir("slide_delay");
+  const Case c = given_case(dir, kSlideAndHinges, 3);
+  Measurement m = issue_case_size();
+  m.bits = 12;
+  m.excitation_seed = 3;   // the review's draw (spml generate --seed 3)
+  const auto on_time = diagnose_case(c, measured(c, (dir / "on_time.h5").string(), 3, m));
+  m.delay_samples = 4;
+  const auto late = diagnose_case(c, measured(c, (dir / "late.h5").string(), 3, m));
+  for (const auto* r : {&on_time, &late})
+    std::cout << "  delay " << (*r)["delay"]["seconds"].get<double>() << " +- " << (*r)["delay"]["stderr"].get<double>() << " s, named "
+              << joined(named(*r)) << "; held out y " << (*r)["final"]["rel_error_test"]["y"].get<double>() << ", p "
+              << (*r)["final"]["rel_error_test"]["p"].get<double>() << "\n";
+  EXPECT_TRUE(named(on_time).empty()) << joined(named(on_time));
+  EXPECT_TRUE(late["delay"]["named"].get<bool>()) << late["delay"].dump();
+  EXPECT_NEAR(late["delay"]["seconds"].get<double>(), 0.0035, 0.001) << late["delay"].dump();   // 4 ticks less the half tick
+  EXPECT_EQ(named(late), std::vector<std::string>{"delay"}) << joined(named(late));
+  for (const std::string j : {"y", "p"})
+    EXPECT_LE(late["final"]["rel_error_test"][j].get<double>(), 1.05 * on_time["final"]["rel_error_test"][j].get<double>()) << j;
+}
+
+// A delay's correction resamples the torques at t + d; at each record's end the last rows have
+// no torque logged that late. Held there, a twenty-eighth review's fast moves (3-8 Hz, rows at
+// 200 Hz) had the test split's last row 9.4 N m off, 37 % of its joint's held-out sum of
+// squares: the delay was read to 1 us, yet the written model read 0.829 % held out where the log
+// without the delay reads 0.697. Now the rows past an end extrapolate the torques where that
+// predicts the record's own last samples better than holding does.
+TEST(DiagnoseBeyond, ADelayCorrectionKeepsTheRecordsEnds) {
+  SPML_SKIP_UNDER_SANITIZERS();
+  const auto dir = test::temp_dir("delay_ends");
+  const Case c = given_case(dir, R"(<mujoco model="planar2v">
+ <compiler angle="radian" inertiafromgeom="false"/>
+ <option timestep="0.001" gravity="0 0 -9.81"><flag contact="disable"/></option>
+ <worldbody>
+  <body name="l1" pos="0 0 0.5">
+   <joint name="s" type="hinge" axis="0 1 0" armature="0.2" damping="1.5"/>
+   <inertial pos="0.2 0 0" mass="2.5" diaginertia="0.004 0.04 0.04"/>
+   <body name="l2" pos="0.4 0 0">
+    <joint name="e" type="hinge" axis="0 1 0" armature="0.1" damping="0.8"/>
+    <inertial pos="0.18 0 0" mass="1.2" diaginertia="0.002 0.015 0.015"/>
+   </body>
+  </body>
+ </worldbody>
+</mujoco>
+)", 2);
+  // Three small sines of 3-8 Hz on each joint, faded in over the first second.
+  const auto reference = (dir / "fast.csv").string();
+  {
+    std::ofstream f(reference);
+    f << "t,q:s,q:e\n";
+    const double hz[2][3] = {{3.3, 5.1, 7.7}, {4.2, 6.3, 7.1}}, phase[2][3] = {{0.4, 2.9, 5.1}, {1.7, 3.8, 0.2}};
+    for (int i = 0; i <= 30000; ++i) {
+      const double t = 1e-3 * i, fade = std::min(1.0, t);
+      f << t;
+      for (int j = 0; j < 2; ++j) {
+        double q = 0;
+        for (int k = 0; k < 3; ++k) q += 0.05 * std::sin(2 * M_PI * hz[j][k] * t + phase[j][k]);
+        f << "," << fade * q;
+      }
+      f << "\n";
+    }
+  }
+  Measurement m = issue_case_size();
+  m.bits = 12;
+  m.reference = reference;
+  const auto on_time = diagnose_case(c, measured(c, (dir / "on_time.h5").string(), 1, m));
+  m.delay_samples = 6;   // 5.6 ms: the last rows lie up to 1.1 samples past the end
+  const auto late = diagnose_case(c, measured(c, (dir / "late.h5").string(), 1, m));
+  std::cout << "  delay " << late["delay"]["seconds"].get<double>() << " s, named " << joined(named(late)) << ", held out "
+            << late["final"]["rel_error_test_all"].get<double>() << " (on time: " << on_time["final"]["rel_error_test_all"].get<double>() << ")\n";
+  // (On these fast moves the exact model's shoulder inertia sum reads 1 % high, 5 standard
+  // errors, with or without the delay - a known wrong answer, README - and `parameters` is
+  // named; the rollouts reject it here. What extended.xml holds is the test.)
+  EXPECT_TRUE(written(on_time).empty()) << joined(named(on_time));
+  EXPECT_EQ(written(late), std::vector<std::string>{"delay"}) << joined(named(late));
+  for (const std::string j : {"s", "e"})
+    EXPECT_LE(late["final"]["rel_error_test"][j].get<double>(), 1.02 * on_time["final"]["rel_error_test"][j].get<double>()) << j;
 }
 
 // An effect outside the vocabulary that the vocabulary takes most of is said to be so. A

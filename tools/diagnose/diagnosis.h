@@ -272,6 +272,12 @@ double wald(const Fit& f, Eigen::Index at, Eigen::Index cols);
 // The held-out test: the residual sum of squares falls by at least the fraction min_gain
 // (sums below `floor` count as `floor`).
 bool gains_on_test(double rss_before, double rss_after, double min_gain, double floor);
+// The delay's held-out test (delay.cc): the residual `after` (the shift applied) removes
+// `min_gain` of `before`'s sum of squares, or of the geometric mean of each joint's own
+// (per_output_ratio) with at least half the joints gaining it on their own, counted over the
+// outputs with rows weighed in w (N rows each).
+bool delay_gains_on_test(const Eigen::VectorXd& before, const Eigen::VectorXd& after, const Eigen::VectorXd& w, const Eigen::VectorXd& b,
+                         Eigen::Index N, double min_gain);
 // Which outputs' own offsets (seconds, standard error) agree on one delay (delay.cc).
 std::vector<bool> agreeing_outputs(const std::vector<std::pair<double, double>>& own, size_t least);
 

@@ -182,7 +182,8 @@ void Diagnosis::choose(const Selection& fresh) {
   const std::vector<BlockColumns> nuis_fit = delay_nuisance(fit_), nuis_test = delay_nuisance(test_);
   struct Side {
     Eigen::VectorXd r_fit;
-    double test = 0, k = 0;
+    Eigen::VectorXd r_test;   // in the band, on the rows weighed
+    double k = 0;
   };
   auto side = [&](const std::vector<int>& kept) {
     const TakenBase t = taken_base(kept);
@@ -210,7 +211,7 @@ void Diagnosis::choose(const Selection& fresh) {
     std::vector<const BlockColumns*> nt;
     for (const auto& b : nuis_test) nt.push_back(&b);
     const Eigen::VectorXd r_test = residual_on(test_, kept, true, own) - predict_blocks(nt, f.coef.tail(f.coef.size() - cols), test_.y0.size());
-    return Side{f.residual, in_band(r_test).cwiseProduct(wt).squaredNorm(), free_parameters(kept, f)};
+    return Side{f.residual, in_band(r_test).cwiseProduct(wt), free_parameters(kept, f)};
   };
   const std::vector<int> kept_a = kept_effects();
   const Side a = side(kept_a);
@@ -220,7 +221,7 @@ void Diagnosis::choose(const Selection& fresh) {
   const Side b = side(kept_b);
   const double n_eff = wf.sum() * effective_fraction(a.r_fit, fit_.N);
   const bool delay_wins = delta_bic(n_eff, b.r_fit.squaredNorm(), a.r_fit.squaredNorm(), a.k + 1 - b.k, rss_floor(fit_.b)) > opt_.bic_threshold &&
-                          gains_on_test(b.test, a.test, std::max(opt_.min_gain, kMinDelayGain), rss_floor(test_.b));
+                          delay_gains_on_test(b.r_test, a.r_test, wt, test_.b, test_.N, std::max(opt_.min_gain, kMinDelayGain));
   if (!delay_wins) return drop_delay(!kept_b.empty());
   swap_delay();
   restore(std::move(corrected));
