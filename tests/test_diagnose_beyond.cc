@@ -141,21 +141,17 @@ nlohmann::json diagnose_case(const Case& c, const std::string& data, int rollout
   return r;
 }
 
-std::vector<std::string> named(const nlohmann::json& r) {
+// The causes named (not superseded), as effect@joint; with `written_only`, those extended.xml
+// holds (not rejected in simulation either).
+std::vector<std::string> named(const nlohmann::json& r, bool written_only = false) {
   std::vector<std::string> out;
   for (const auto& c : r["causes"])
-    if (!c.contains("superseded_by")) out.push_back(c["effect"].get<std::string>() + (c["effect"] == "delay" || c["effect"] == "parameters" ? "" : "@" + c["joints"][0].get<std::string>()));
-  return out;
-}
-
-// The causes extended.xml holds: named, and not rejected in simulation.
-std::vector<std::string> written(const nlohmann::json& r) {
-  std::vector<std::string> out;
-  for (const auto& c : r["causes"])
-    if (!c.contains("superseded_by") && !c.contains("rejected"))
+    if (!c.contains("superseded_by") && !(written_only && c.contains("rejected")))
       out.push_back(c["effect"].get<std::string>() + (c["effect"] == "delay" || c["effect"] == "parameters" ? "" : "@" + c["joints"][0].get<std::string>()));
   return out;
 }
+
+std::vector<std::string> written(const nlohmann::json& r) { return named(r, true); }
 
 std::string joined(const std::vector<std::string>& v) {
   std::string s;
@@ -1320,6 +1316,24 @@ Measurement issue_case_size() {
   return m;
 }
 
+// One draw diagnosed as logged on time and with its torques `delay_samples` ticks late (files
+// NAME.h5 and NAME_late.h5 in dir), the delay read on each printed.
+struct OnTimeAndLate {
+  nlohmann::json on_time, late;
+};
+OnTimeAndLate on_time_and_late(const Case& c, const std::filesystem::path& dir, const std::string& name, unsigned seed, Measurement m,
+                               int delay_samples) {
+  OnTimeAndLate out;
+  out.on_time = diagnose_case(c, measured(c, (dir / (name + ".h5")).string(), seed, m));
+  m.delay_samples = delay_samples;
+  out.late = diagnose_case(c, measured(c, (dir / (name + "_late.h5")).string(), seed, m));
+  for (const auto* r : {&out.on_time, &out.late})
+    std::cout << "  " << name << (r == &out.late ? " late" : " on time") << ": delay " << (*r)["delay"]["seconds"].get<double>() << " +- "
+              << (*r)["delay"]["stderr"].get<double>() << " s below " << (*r)["delay"]["band_hz"].get<double>() << " Hz, named "
+              << joined(named(*r)) << ", held out " << (*r)["final"]["rel_error_test_all"].get<double>() << "\n";
+  return out;
+}
+
 // A model text with its one `key` replaced by `value`.
 std::string filled(std::string xml, const std::string& key, const std::string& value) { return xml.replace(xml.find(key), key.size(), value); }
 
@@ -1803,16 +1817,11 @@ TEST(DiagnoseBeyond, CoarseEncodersDoNotPullTheDelay) {
   const Case c = given_case(dir, kArm3Spatial, 3);
   Measurement m = issue_case_size();
   m.bits = 12;
-  const auto clean = diagnose_case(c, measured(c, (dir / "clean.h5").string(), 5, m));
+  const auto [clean, late] = on_time_and_late(c, dir, "arm3", 5, m, 5);
   EXPECT_FALSE(clean["delay"]["named"].get<bool>()) << clean["delay"].dump();
   EXPECT_NEAR(clean["delay"]["seconds"].get<double>(), 0, 0.001) << clean["delay"].dump();
   EXPECT_LT(clean["delay"]["band_hz"].get<double>(), m.lowpass_hz) << clean["delay"].dump();
   EXPECT_TRUE(named(clean).empty()) << joined(named(clean));
-  m.delay_samples = 5;
-  const auto late = diagnose_case(c, measured(c, (dir / "late.h5").string(), 5, m));
-  for (const auto* r : {&clean, &late})
-    std::cout << "  delay " << (*r)["delay"]["seconds"].get<double>() << " +- " << (*r)["delay"]["stderr"].get<double>() << " s below "
-              << (*r)["delay"]["band_hz"].get<double>() << " Hz, named " << joined(named(*r)) << "\n";
   EXPECT_TRUE(late["delay"]["named"].get<bool>()) << late["delay"].dump();
   EXPECT_NEAR(late["delay"]["seconds"].get<double>(), 0.005, 0.001) << late["delay"].dump();
   EXPECT_EQ(named(late), std::vector<std::string>{"delay"}) << joined(named(late));
@@ -1825,11 +1834,7 @@ TEST(DiagnoseBeyond, CoarseEncodersDoNotPullTheDelay) {
   Measurement ch = issue_case_size();
   ch.bits = 12;
   ch.kind = "chirp";
-  const auto on_time = diagnose_case(arm4, measured(arm4, (dir / "chirp.h5").string(), 1, ch));
-  ch.delay_samples = 5;
-  const auto chirp = diagnose_case(arm4, measured(arm4, (dir / "chirp_late.h5").string(), 1, ch));
-  std::cout << "  chirp: delay " << chirp["delay"]["seconds"].get<double>() << " s, named " << joined(named(chirp)) << ", held out "
-            << chirp["final"]["rel_error_test_all"].get<double>() << " (on time: " << on_time["final"]["rel_error_test_all"].get<double>() << ")\n";
+  const auto [on_time, chirp] = on_time_and_late(arm4, dir, "chirp", 1, ch, 5);
   EXPECT_TRUE(named(on_time).empty()) << joined(named(on_time));
   EXPECT_TRUE(chirp["delay"]["named"].get<bool>()) << chirp["delay"].dump();
   EXPECT_NEAR(chirp["delay"]["seconds"].get<double>(), 0.005, 0.001) << chirp["delay"].dump();
@@ -1869,13 +1874,7 @@ TEST(DiagnoseBeyond, ADelayOnLightJointsBesideAHeavySlideIsNamed) {
   Measurement m = issue_case_size();
   m.bits = 12;
   m.excitation_seed = 3;   // the review's draw (spml generate --seed 3)
-  const auto on_time = diagnose_case(c, measured(c, (dir / "on_time.h5").string(), 3, m));
-  m.delay_samples = 4;
-  const auto late = diagnose_case(c, measured(c, (dir / "late.h5").string(), 3, m));
-  for (const auto* r : {&on_time, &late})
-    std::cout << "  delay " << (*r)["delay"]["seconds"].get<double>() << " +- " << (*r)["delay"]["stderr"].get<double>() << " s, named "
-              << joined(named(*r)) << "; held out y " << (*r)["final"]["rel_error_test"]["y"].get<double>() << ", p "
-              << (*r)["final"]["rel_error_test"]["p"].get<double>() << "\n";
+  const auto [on_time, late] = on_time_and_late(c, dir, "slide", 3, m, 4);
   EXPECT_TRUE(named(on_time).empty()) << joined(named(on_time));
   EXPECT_TRUE(late["delay"]["named"].get<bool>()) << late["delay"].dump();
   EXPECT_NEAR(late["delay"]["seconds"].get<double>(), 0.0035, 0.001) << late["delay"].dump();   // 4 ticks less the half tick
@@ -1928,11 +1927,8 @@ TEST(DiagnoseBeyond, ADelayCorrectionKeepsTheRecordsEnds) {
   Measurement m = issue_case_size();
   m.bits = 12;
   m.reference = reference;
-  const auto on_time = diagnose_case(c, measured(c, (dir / "on_time.h5").string(), 1, m));
-  m.delay_samples = 6;   // 5.6 ms: the last rows lie up to 1.1 samples past the end
-  const auto late = diagnose_case(c, measured(c, (dir / "late.h5").string(), 1, m));
-  std::cout << "  delay " << late["delay"]["seconds"].get<double>() << " s, named " << joined(named(late)) << ", held out "
-            << late["final"]["rel_error_test_all"].get<double>() << " (on time: " << on_time["final"]["rel_error_test_all"].get<double>() << ")\n";
+  // 6 ticks, 5.6 ms: the last rows lie up to 1.1 samples past the end.
+  const auto [on_time, late] = on_time_and_late(c, dir, "fast", 1, m, 6);
   // (On these fast moves the exact model's shoulder inertia sum reads 1 % high, 5 standard
   // errors, with or without the delay - a known wrong answer, README - and `parameters` is
   // named; the rollouts reject it here. What extended.xml holds is the test.)
