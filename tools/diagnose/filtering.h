@@ -68,6 +68,10 @@ struct ParallelFilter {
   std::vector<Section> sections;
   std::vector<Section> probe, probe_half;   // low-passes at probe_hz and half of it
   double probe_hz = 0;
+  // Continue each segment past its ends by linear prediction before the pass, in place of the
+  // odd reflection: set where the torques are not filtered again (filtering.cc says why).
+  bool predicted_ends = false;
+  Eigen::Index settle = 0;   // the pass's settling (samples): how far the ends are continued
   bool empty() const { return sections.empty(); }
 };
 
