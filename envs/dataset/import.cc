@@ -450,7 +450,8 @@ double start_up_transient(const std::vector<Eigen::Matrix<double, 5, 1>>& sos, c
 // the anti-alias cut-off applied (0: none); `steps` gets the quantization step of each position
 // it differentiates, where the raw log has one (spml/1 `position_steps`).
 double condition(const Conditioning& c, const std::string& source, Eigen::VectorXd& t, std::vector<Eigen::VectorXd>& xs,
-               std::vector<std::string>& xn, std::vector<Eigen::VectorXd>& ys, std::map<std::string, double>& steps) {
+               std::vector<std::string>& xn, std::vector<Eigen::VectorXd>& ys, std::map<std::string, double>& steps,
+               double& kept_transient) {
   if (!c.any()) return 0;
   if (c.derive)
     for (size_t k = 0; k < xs.size(); ++k)
@@ -532,6 +533,7 @@ double condition(const Conditioning& c, const std::string& source, Eigen::Vector
   // was told to drop more samples than the log had): the cut-off that settles within a quarter
   // of the log is said instead (the settling scales with the cut-off's period).
   if (transient > 0.01) {
+    kept_transient = transient;
     std::cerr << "spml: warning: " << source << ": ";
     if (2 * settle >= n)
       std::cerr << "--lowpass " << c.lowpass_hz << " Hz: its start-up transient (up to " << percent_text(transient) << " % of the RMS of "
@@ -613,7 +615,8 @@ Dataset table_to_dataset(const Table& table, const ImportSpec& spec) {
     }
   }
   std::map<std::string, double> steps;
-  const double anti_alias_hz = condition(spec.conditioning, table.source, tcol, xs, xn, ys, steps);
+  double kept_transient = 0;
+  const double anti_alias_hz = condition(spec.conditioning, table.source, tcol, xs, xn, ys, steps, kept_transient);
   const Eigen::Index N = xs.front().size();
   std::vector<SplitRange> ranges = spec.splits;
   if (ranges.empty()) ranges.push_back({"train", "", ""});
@@ -653,6 +656,9 @@ Dataset table_to_dataset(const Table& table, const ImportSpec& spec) {
     ds.provenance["filter"] = lowpass_record_text({spec.conditioning.filter_order, spec.conditioning.lowpass_hz});
   if (spec.conditioning.derive) ds.provenance["derivatives"] = "central-difference";
   if (!steps.empty()) ds.provenance["position_steps"] = position_steps_text(steps);
+  // The low-pass's start-up transient the rows kept at the log's ends still hold (the warning
+  // above), as a share of the RMS of the column it is largest in.
+  if (kept_transient > 0) ds.provenance["start_up_transient"] = std::to_string(kept_transient);
   if (spec.conditioning.decimate > 1) {
     DecimationRecord d{spec.conditioning.decimate, std::nullopt};
     if (anti_alias_hz > 0) d.anti_alias = LowpassRecord{kAntiAliasOrder, anti_alias_hz};

@@ -57,6 +57,7 @@ double decimated_by(const Dataset& ds) {
 FilterPlan plan_filter(const Dataset& ds, const std::vector<Eigen::VectorXd>& q, const std::vector<Eigen::VectorXd>& qdd,
                        const std::vector<Eigen::VectorXd>& residual, double rate_hz, std::vector<std::string>& notes) {
   FilterPlan plan;
+  plan.ends_transient = ds.provenance.count("start_up_transient") > 0;
   const auto derived = ds.provenance.find("derivatives");
   const bool differences = derived != ds.provenance.end() && derived->second == "central-difference";
   const auto it = ds.provenance.find("filter");
@@ -137,7 +138,7 @@ ParallelFilter plan_sections(const FilterPlan& plan, const Split& s) {
   const double dt = median_step(s.t);
   if (!(dt > 0) || plan.lowpass.cutoff_hz >= kWidestLowpassShare / dt) return f;
   f.sections = butterworth_lowpass(plan.lowpass.order, plan.lowpass.cutoff_hz, 1.0 / dt);
-  f.predicted_ends = !plan.torques;
+  f.predicted_ends = !plan.torques && !plan.ends_transient && !plan.smooth_kept;
   f.settle = settling_samples(f.sections);
   // Below 0.4 of the rate, a probe low-pass still separates the columns (filter_stacked); a
   // cut-off too near the rate for one leaves every column filtered, as before the probe.
@@ -145,7 +146,8 @@ ParallelFilter plan_sections(const FilterPlan& plan, const Split& s) {
   if (plan.smooth_kept && probe < kWidestLowpassShare / dt) {
     f.probe = butterworth_lowpass(4, probe, 1.0 / dt);
     f.probe_half = butterworth_lowpass(4, 0.5 * probe, 1.0 / dt);
-    f.probe_hz = probe;
+    f.keep_smooth = plan.smooth_kept;
+    if (f.keep_smooth) f.probe_hz = probe;
   }
   return f;
 }
@@ -189,9 +191,11 @@ Eigen::VectorXd predicted_continuation(const Eigen::VectorXd& x, Eigen::Index le
 // error on an exact model, and the inertia read 0.17 % high (133 standard errors, `parameters`
 // named). Continued by linear prediction over the pass's settling, the columns' ends follow
 // the motion (0.0099 N m there). Where the predictor is unstable, or the segment too short to
-// fit it, the odd reflection stays.
-Eigen::VectorXd segment_pass(const ParallelFilter& f, const Eigen::VectorXd& x) {
-  if (!f.predicted_ends) return filtfilt(f.sections, x);
+// fit it, the odd reflection stays. A column that switches (sign(qd), a LuGre force) keeps it
+// too: no predictor continues a step it has not seen, and the suite's LuGre draws, read as
+// `stick_slip` with the reflection, were read as `coulomb` with their force predicted.
+Eigen::VectorXd segment_pass(const ParallelFilter& f, const Eigen::VectorXd& x, bool predicted) {
+  if (!predicted) return filtfilt(f.sections, x);
   const Eigen::Index len = f.settle, window = std::max(4 * len, kPredictionRows);
   if (x.size() < kPredictionRows) return filtfilt(f.sections, x);
   const Eigen::VectorXd after = predicted_continuation(x, len, window), before = predicted_continuation(x.reverse(), len, window);
@@ -219,28 +223,31 @@ bool switches(const ParallelFilter& f, const Eigen::MatrixXd& A, Eigen::Index c,
 
 }  // namespace
 
-// With a probe (FilterPlan::smooth_kept), a column that does not switch is left as it is
-// (prepare.cc, weigh_second_pass says why); one that switches (sign(qd), a LuGre force, a
-// ripple faster than the band) holds power far above the band, which the torques lost, and
-// goes through the low-pass again, as the discontinuous forces parallel filtering is for.
-void filter_stacked(const ParallelFilter& f, Eigen::MatrixXd& A, Eigen::Index N, const std::vector<Eigen::Index>& runs) {
+// Where smooth columns are kept (FilterPlan::smooth_kept), a column that does not switch is
+// left as it is (prepare.cc, weigh_second_pass says why); one that switches (sign(qd), a LuGre
+// force, a ripple faster than the band) holds power far above the band, which the torques
+// lost, and goes through the low-pass again, as the discontinuous forces parallel filtering is
+// for. Otherwise every column goes through again, the model's own with their ends predicted
+// where the filter says so (segment_pass).
+void filter_stacked(const ParallelFilter& f, Eigen::MatrixXd& A, Eigen::Index N, const std::vector<Eigen::Index>& runs, bool model_columns) {
   if (f.sections.empty() || N < 2) return;
   const std::vector<Eigen::Index> bounds = segment_bounds(N, runs);
   for (Eigen::Index c = 0; c < A.cols(); ++c) {
-    if (!f.probe.empty() && !switches(f, A, c, N, bounds)) continue;
+    if (f.keep_smooth && !switches(f, A, c, N, bounds)) continue;
+    const bool predicted = model_columns && f.predicted_ends;
     for (Eigen::Index o = 0; o * N < A.rows(); ++o)
       for (size_t r = 0; r + 1 < bounds.size(); ++r) {
         const Eigen::Index at = o * N + bounds[r], len = bounds[r + 1] - bounds[r];
         if (len < 2) continue;
         const Eigen::VectorXd seg = A.col(c).segment(at, len);
-        if (seg.cwiseAbs().maxCoeff() > 0) A.col(c).segment(at, len) = segment_pass(f, seg);
+        if (seg.cwiseAbs().maxCoeff() > 0) A.col(c).segment(at, len) = segment_pass(f, seg, predicted);
       }
   }
 }
 
-void filter_stacked(const ParallelFilter& f, Eigen::VectorXd& b, Eigen::Index N, const std::vector<Eigen::Index>& runs) {
+void filter_stacked(const ParallelFilter& f, Eigen::VectorXd& b, Eigen::Index N, const std::vector<Eigen::Index>& runs, bool model_columns) {
   Eigen::MatrixXd B = b;
-  filter_stacked(f, B, N, runs);
+  filter_stacked(f, B, N, runs, model_columns);
   b = B.col(0);
 }
 

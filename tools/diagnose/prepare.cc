@@ -116,7 +116,7 @@ void Diagnosis::weigh_second_pass() {
   };
   auto change = [&](const Eigen::VectorXd& x) {
     Eigen::VectorXd twice = x;
-    filter_stacked(every, twice, fit_.N, fit_.runs);
+    filter_stacked(every, twice, fit_.N, fit_.runs, true);
     return Eigen::VectorXd(twice - x);
   };
   const Eigen::VectorXd b = centred(fit_.b), torques = change(b), model = change(centred(fit_.base.times(base_.model_values)));
@@ -137,15 +137,15 @@ void Diagnosis::weigh_second_pass() {
 void Diagnosis::apply_filter(SplitData& d) const {
   d.sos = plan_sections(filter_plan_, d.split);
   if (d.sos.empty()) return;
-  for (auto& part : d.base.parts) filter_stacked(d.sos, part, d.N, d.runs);
+  for (auto& part : d.base.parts) filter_stacked(d.sos, part, d.N, d.runs, true);
   if (filter_plan_.torques) filter_stacked(d.sos, d.b, d.N, d.runs);
   d.given = d.base.times(base_.model_values);
   if (d.friction.size()) {
-    filter_stacked(d.sos, d.friction, d.N);
+    filter_stacked(d.sos, d.friction, d.N, {}, true);
     d.given += d.friction;
   }
-  if (d.soft.size()) filter_stacked(d.sos, d.soft, d.N);
-  if (d.own_level.size()) filter_stacked(d.sos, d.own_level, d.N);
+  if (d.soft.size()) filter_stacked(d.sos, d.soft, d.N, {}, true);
+  if (d.own_level.size()) filter_stacked(d.sos, d.own_level, d.N, {}, true);
   d.y0 = d.b - d.given;
 }
 

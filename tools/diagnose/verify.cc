@@ -16,7 +16,7 @@ namespace spml::diagnose_detail {
 Eigen::VectorXd Diagnosis::written_prediction(const MjcfRegressor& ext, const MjcfRegressor::Base& ebase, const SplitData& s) const {
   const JointColumns cols(ext, s.split);
   Eigen::VectorXd pred = stacked_base_regressor(ext, ebase, s.split.X, cols, s.name) * ebase.model_values;
-  filter_stacked(s.sos, pred, s.N, s.runs);
+  filter_stacked(s.sos, pred, s.N, s.runs, true);
   if (s.friction.size()) pred += s.friction;   // MuJoCo's frictionloss, as in `given` (load.cc)
   // ... at the written model's levels where they differ (a level taken over, a re-identified one).
   bool same = true;
@@ -25,7 +25,7 @@ Eigen::VectorXd Diagnosis::written_prediction(const MjcfRegressor& ext, const Mj
     if (s.soft.size()) pred -= s.soft;
     Eigen::VectorXd soft = frictionloss_correction(s, ext.model());
     if (soft.size()) {
-      filter_stacked(s.sos, soft, s.N);
+      filter_stacked(s.sos, soft, s.N, {}, true);
       pred += soft;
     }
   }

@@ -13,7 +13,7 @@ namespace spml::diagnose_detail {
 
 WrittenParameters Diagnosis::consistent_parameters() const {
   Eigen::MatrixXd W = stacked_standard_regressor(*reg_, fit_.split.X, *fit_.cols, opt_.data + ": split " + fit_.name);
-  filter_stacked(fit_.sos, W, fit_.N, fit_.runs);
+  filter_stacked(fit_.sos, W, fit_.N, fit_.runs, true);
   const std::vector<int> effects = kept_effects();
   // The offset between torques and states goes free beside them, last (decide_parameters says
   // why): it is the data's, not the model's, so it is left out of the written prediction.
@@ -55,8 +55,9 @@ WrittenParameters Diagnosis::consistent_parameters() const {
     // Not through a recorded low-pass, where that noise is gone and the projection only costs
     // efficiency (the Panda: joint 7's rollouts 22.7 mrad two-stage, 21.0 one-stage, 22.0 shipped).
     Eigen::MatrixXd Z(W.rows(), W.cols() + E.cols());
-    Z.leftCols(W.cols()) = stacked_standard_regressor(*reg_, twin_->split.X, *twin_->cols, opt_.data + ": split " + fit_.name + " (simulated)");
-    filter_stacked(twin_->sos, Z, twin_->N, twin_->runs);
+    Eigen::MatrixXd simulated = stacked_standard_regressor(*reg_, twin_->split.X, *twin_->cols, opt_.data + ": split " + fit_.name + " (simulated)");
+    filter_stacked(twin_->sos, simulated, twin_->N, twin_->runs, true);
+    Z.leftCols(W.cols()) = simulated;
     at = W.cols();
     for (int k : effects) {
       const BlockColumns c = columns_of(cands_[static_cast<size_t>(k)], *twin_);
