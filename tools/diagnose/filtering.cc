@@ -191,9 +191,13 @@ Eigen::VectorXd predicted_continuation(const Eigen::VectorXd& x, Eigen::Index le
 // error on an exact model, and the inertia read 0.17 % high (133 standard errors, `parameters`
 // named). Continued by linear prediction over the pass's settling, the columns' ends follow
 // the motion (0.0099 N m there). Where the predictor is unstable, or the segment too short to
-// fit it, the odd reflection stays. A column that switches (sign(qd), a LuGre force) keeps it
-// too: no predictor continues a step it has not seen, and the suite's LuGre draws, read as
-// `stick_slip` with the reflection, were read as `coulomb` with their force predicted.
+// fit it, the odd reflection stays. Only the model's own columns are continued (filter_stacked's
+// `model_columns`): a candidate's and a stateful force's keep the reflection the friction tests
+// were set against (with every column continued, a Coulomb level beside a flat hump was no
+// longer determined); the model's declared levels and frictionloss correction, which its
+// prediction holds, are continued with it. Nor where the import's own start-up transient stayed in the log's
+// ends (FilterPlan::ends_transient): LuGre logs that keep it (200 rows dropped where 612 settle)
+// were read as `coulomb` with their ends continued.
 Eigen::VectorXd segment_pass(const ParallelFilter& f, const Eigen::VectorXd& x, bool predicted) {
   if (!predicted) return filtfilt(f.sections, x);
   const Eigen::Index len = f.settle, window = std::max(4 * len, kPredictionRows);

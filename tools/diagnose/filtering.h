@@ -72,8 +72,9 @@ struct ParallelFilter {
   std::vector<Section> probe, probe_half;   // low-passes at the switching probe and half of it
   double probe_hz = 0;                      // the probe, where smooth columns are left as they are
   bool keep_smooth = false;                 // FilterPlan::smooth_kept
-  // A smooth column's segments are continued past their ends by linear prediction before the
-  // pass, in place of the odd reflection: set where the torques are not filtered again
+  // The model's own columns' segments are continued past their ends by linear prediction
+  // before the pass, in place of the odd reflection: set where the torques are not filtered
+  // again, every column is, and the log's ends hold no start-up transient of the import
   // (filtering.cc, segment_pass, says why).
   bool predicted_ends = false;
   Eigen::Index settle = 0;   // the pass's settling (samples): how far the ends are continued
