@@ -186,17 +186,16 @@ Eigen::VectorXd predicted_continuation(const Eigen::VectorXd& x, Eigen::Index le
 // One segment's pass. The torques of a recorded low-pass went through it once over the whole
 // log, so at a split's ends they hold no start-up transient; a second pass over the model's
 // columns of that split alone, started on an odd reflection, does: its curvature flips at the
-// end. On 3-8 Hz moves at 200 Hz (a 20 Hz import) the last 30 rows of a test split were left
-// 0.28 N m off where the rest lay within 0.01, three quarters of the model as given's held-out
-// error on an exact model, and the inertia read 0.17 % high (133 standard errors, `parameters`
-// named). Continued by linear prediction over the pass's settling, the columns' ends follow
-// the motion (0.0099 N m there). Where the predictor is unstable, or the segment too short to
-// fit it, the odd reflection stays. Only the model's own columns are continued (filter_stacked's
-// `model_columns`): a candidate's and a stateful force's keep the reflection the friction tests
-// were set against (with every column continued, a Coulomb level beside a flat hump was no
-// longer determined); the model's declared levels and frictionloss correction, which its
-// prediction holds, are continued with it. Nor where the import's own start-up transient stayed in the log's
-// ends (FilterPlan::ends_transient): LuGre logs that keep it (200 rows dropped where 612 settle)
+// end. Under 3-8 Hz moves at 200 Hz (a 20 Hz import) an exact hinge's test split had its last
+// 50 rows 0.229 N m off where its middle lay within 0.040, most of the model as given's
+// held-out error. Continued by linear prediction over the pass's settling, the columns' ends
+// follow the motion (0.039 N m there). Where the predictor is unstable, or the segment too
+// short to fit it, the odd reflection stays. Only the model's own columns are continued
+// (filter_stacked's `model_columns`), its declared levels and frictionloss correction with
+// them; a candidate's and a stateful force's keep the reflection the friction tests were set
+// against (with every column continued, a Coulomb level beside a flat hump was no longer
+// determined). Nor where the import's own start-up transient stayed in the log's ends
+// (FilterPlan::ends_transient): LuGre logs that keep it (200 rows dropped where 612 settle)
 // were read as `coulomb` with their ends continued.
 Eigen::VectorXd segment_pass(const ParallelFilter& f, const Eigen::VectorXd& x, bool predicted) {
   if (!predicted) return filtfilt(f.sections, x);
