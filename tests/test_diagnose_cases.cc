@@ -473,7 +473,6 @@ TEST(DiagnoseCases, ARecordedLowPassFiltersOnlyTheColumnsThatSwitch) {
   recorded.probe_hz = diagnose_detail::kSwitchingProbe * cutoff;
   recorded.probe = butterworth_lowpass(4, recorded.probe_hz, rate);
   recorded.probe_half = butterworth_lowpass(4, 0.5 * recorded.probe_hz, rate);
-  recorded.keep_smooth = true;
   diagnose_detail::filter_stacked(recorded, A, A.rows());
   EXPECT_EQ((A.col(0) - raw.col(0)).cwiseAbs().maxCoeff(), 0.0);
   EXPECT_LT((A.col(1) - filtfilt(sos, raw.col(1))).cwiseAbs().maxCoeff(), 1e-12);

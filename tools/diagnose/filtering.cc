@@ -146,8 +146,7 @@ ParallelFilter plan_sections(const FilterPlan& plan, const Split& s) {
   if (plan.smooth_kept && probe < kWidestLowpassShare / dt) {
     f.probe = butterworth_lowpass(4, probe, 1.0 / dt);
     f.probe_half = butterworth_lowpass(4, 0.5 * probe, 1.0 / dt);
-    f.keep_smooth = plan.smooth_kept;
-    if (f.keep_smooth) f.probe_hz = probe;
+    f.probe_hz = probe;
   }
   return f;
 }
@@ -226,18 +225,18 @@ bool switches(const ParallelFilter& f, const Eigen::MatrixXd& A, Eigen::Index c,
 
 }  // namespace
 
-// Where smooth columns are kept (FilterPlan::smooth_kept), a column that does not switch is
-// left as it is (prepare.cc, weigh_second_pass says why); one that switches (sign(qd), a LuGre
-// force, a ripple faster than the band) holds power far above the band, which the torques
-// lost, and goes through the low-pass again, as the discontinuous forces parallel filtering is
-// for. Otherwise every column goes through again, the model's own with their ends predicted
+// With a probe (FilterPlan::smooth_kept), a column that does not switch is left as it is
+// (prepare.cc, weigh_second_pass says why); one that switches (sign(qd), a LuGre force, a
+// ripple faster than the band) holds power far above the band, which the torques lost, and
+// goes through the low-pass again, as the discontinuous forces parallel filtering is for.
+// Without one every column goes through again, the model's own with their ends predicted
 // where the filter says so (segment_pass).
 void filter_stacked(const ParallelFilter& f, Eigen::MatrixXd& A, Eigen::Index N, const std::vector<Eigen::Index>& runs, bool model_columns) {
   if (f.sections.empty() || N < 2) return;
   const std::vector<Eigen::Index> bounds = segment_bounds(N, runs);
+  const bool predicted = model_columns && f.predicted_ends;
   for (Eigen::Index c = 0; c < A.cols(); ++c) {
-    if (f.keep_smooth && !switches(f, A, c, N, bounds)) continue;
-    const bool predicted = model_columns && f.predicted_ends;
+    if (!f.probe.empty() && !switches(f, A, c, N, bounds)) continue;
     for (Eigen::Index o = 0; o * N < A.rows(); ++o)
       for (size_t r = 0; r + 1 < bounds.size(); ++r) {
         const Eigen::Index at = o * N + bounds[r], len = bounds[r + 1] - bounds[r];

@@ -69,13 +69,12 @@ constexpr double kSwitchingProbe = 3;
 // from those that are smooth functions of the filtered states (empty: every column filtered).
 struct ParallelFilter {
   std::vector<Section> sections;
-  std::vector<Section> probe, probe_half;   // low-passes at the switching probe and half of it
-  double probe_hz = 0;                      // the probe, where smooth columns are left as they are
-  bool keep_smooth = false;                 // FilterPlan::smooth_kept
+  std::vector<Section> probe, probe_half;   // low-passes at probe_hz and half of it
+  double probe_hz = 0;
   // The model's own columns' segments are continued past their ends by linear prediction
   // before the pass, in place of the odd reflection: set where the torques are not filtered
-  // again, every column is, and the log's ends hold no start-up transient of the import
-  // (filtering.cc, segment_pass, says why).
+  // again, no smooth column is left as it is (no probe), and the log's ends hold no start-up
+  // transient of the import (filtering.cc, segment_pass, says why).
   bool predicted_ends = false;
   Eigen::Index settle = 0;   // the pass's settling (samples): how far the ends are continued
   bool empty() const { return sections.empty(); }
@@ -91,9 +90,9 @@ std::vector<Eigen::Index> segment_bounds(Eigen::Index N, const std::vector<Eigen
 // Filters the columns of a stacked matrix (rows o*N .. o*N+N-1 are output o) segment-wise;
 // `runs` (first rows of the runs after the first, when several records are stacked) splits each
 // output's rows further, so that no filter runs across the junction of two records. Where the
-// filter keeps smooth columns, a column that does not switch (kSwitchingShare) is left as is.
-// `model_columns`: A holds the model's own columns (its rigid-body and joint terms, or their
-// prediction), whose ends are predicted where the filter says so and they do not switch; a
+// filter has a probe, a column that does not switch (kSwitchingShare) is left as is.
+// `model_columns`: A holds the model's own columns (its rigid-body and joint terms, its declared
+// levels, or their prediction), whose ends are predicted where the filter says so; a
 // candidate's columns keep the odd reflection (filtering.cc, segment_pass, says why).
 void filter_stacked(const ParallelFilter& f, Eigen::MatrixXd& A, Eigen::Index N, const std::vector<Eigen::Index>& runs = {},
                     bool model_columns = false);
