@@ -616,6 +616,7 @@ Dataset table_to_dataset(const Table& table, const ImportSpec& spec) {
   }
   std::map<std::string, double> steps;
   double kept_transient = 0;
+  const size_t given_columns = xn.size();   // condition() appends the states it derives
   const double anti_alias_hz = condition(spec.conditioning, table.source, tcol, xs, xn, ys, steps, kept_transient);
   const Eigen::Index N = xs.front().size();
   std::vector<SplitRange> ranges = spec.splits;
@@ -654,7 +655,14 @@ Dataset table_to_dataset(const Table& table, const ImportSpec& spec) {
   // (README, spml/1: `filter`, `derivatives`).
   if (spec.conditioning.lowpass_hz > 0)
     ds.provenance["filter"] = lowpass_record_text({spec.conditioning.filter_order, spec.conditioning.lowpass_hz});
-  if (spec.conditioning.derive) ds.provenance["derivatives"] = "central-difference";
+  if (spec.conditioning.derive) {
+    ds.provenance["derivatives"] = "central-difference";
+    // Which states the differences made (the others were given, and only filtered): what
+    // diagnose needs to replay the chain on a known motion (its chain bias).
+    std::string derived;
+    for (size_t k = given_columns; k < xn.size(); ++k) derived += (derived.empty() ? "" : " ") + xn[k];
+    ds.provenance["derived_columns"] = derived;
+  }
   if (!steps.empty()) ds.provenance["position_steps"] = position_steps_text(steps);
   // The low-pass's start-up transient the rows kept at the log's ends still hold (the warning
   // above), as a share of the RMS of the column it is largest in.

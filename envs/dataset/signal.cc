@@ -224,22 +224,37 @@ std::map<std::string, double> parse_position_steps(const std::string& text) {
   return out;
 }
 
-DerivedSignals derive_like_import(const Eigen::VectorXd& raw, double rate_hz, const std::optional<LowpassRecord>& lowpass, const DecimationRecord& decimation) {
-  DerivedSignals d;
-  d.q = lowpass && lowpass->cutoff_hz < 0.5 * rate_hz ? filtfilt(butterworth_lowpass(lowpass->order, lowpass->cutoff_hz, rate_hz), raw) : raw;
-  d.qd = central_difference(d.q, 1 / rate_hz);
-  d.qdd = central_difference(d.qd, 1 / rate_hz);
-  if (decimation.anti_alias && decimation.anti_alias->cutoff_hz < 0.5 * rate_hz) {
-    const auto sos = butterworth_lowpass(decimation.anti_alias->order, decimation.anti_alias->cutoff_hz, rate_hz);
-    for (auto* v : {&d.q, &d.qd, &d.qdd}) *v = filtfilt(sos, *v);
-  }
+namespace {
+
+// The import's low-pass at `rate_hz` (none, or one at or above half the rate: the column as it is).
+Eigen::VectorXd lowpassed_like_import(const Eigen::VectorXd& raw, double rate_hz, const std::optional<LowpassRecord>& lowpass) {
+  return lowpass && lowpass->cutoff_hz < 0.5 * rate_hz ? filtfilt(butterworth_lowpass(lowpass->order, lowpass->cutoff_hz, rate_hz), raw) : raw;
+}
+
+// The decimation's anti-alias pass and every keep-th sample.
+Eigen::VectorXd decimated_like_import(Eigen::VectorXd v, double rate_hz, const DecimationRecord& decimation) {
+  if (decimation.anti_alias && decimation.anti_alias->cutoff_hz < 0.5 * rate_hz)
+    v = filtfilt(butterworth_lowpass(decimation.anti_alias->order, decimation.anti_alias->cutoff_hz, rate_hz), v);
   const int keep = std::max(decimation.keep, 1);
-  for (auto* v : {&d.q, &d.qd, &d.qdd}) {
-    Eigen::VectorXd kept((v->size() + keep - 1) / keep);
-    for (Eigen::Index i = 0; i < kept.size(); ++i) kept[i] = (*v)[i * keep];
-    *v = kept;
-  }
+  Eigen::VectorXd kept((v.size() + keep - 1) / keep);
+  for (Eigen::Index i = 0; i < kept.size(); ++i) kept[i] = v[i * keep];
+  return kept;
+}
+
+}  // namespace
+
+DerivedSignals derive_like_import(const Eigen::VectorXd& raw, double rate_hz, const std::optional<LowpassRecord>& lowpass, const DecimationRecord& decimation,
+                                  const Eigen::VectorXd* velocity, const Eigen::VectorXd* acceleration) {
+  DerivedSignals d;
+  d.q = lowpassed_like_import(raw, rate_hz, lowpass);
+  d.qd = velocity ? lowpassed_like_import(*velocity, rate_hz, lowpass) : central_difference(d.q, 1 / rate_hz);
+  d.qdd = acceleration ? lowpassed_like_import(*acceleration, rate_hz, lowpass) : central_difference(d.qd, 1 / rate_hz);
+  for (auto* v : {&d.q, &d.qd, &d.qdd}) *v = decimated_like_import(std::move(*v), rate_hz, decimation);
   return d;
+}
+
+Eigen::VectorXd condition_like_import(const Eigen::VectorXd& raw, double rate_hz, const std::optional<LowpassRecord>& lowpass, const DecimationRecord& decimation) {
+  return decimated_like_import(lowpassed_like_import(raw, rate_hz, lowpass), rate_hz, decimation);
 }
 
 }  // namespace spml

@@ -311,7 +311,8 @@ class Diagnosis {
   Eigen::VectorXd frictionloss_correction(const SplitData& d, const mjModel* m) const;
   void add_declared_forces(const SplitData& d, Eigen::VectorXd& into) const;
   // prepare.cc
-  SplitData prepare(const Split& s, const std::vector<Eigen::Index>& runs = {}, const SplitData* continues = nullptr);
+  // `filtered` false: the parallel filter is not applied (a replay at the import's own rate, chain_bias.cc).
+  SplitData prepare(const Split& s, const std::vector<Eigen::Index>& runs = {}, const SplitData* continues = nullptr, bool filtered = true);
   void plan_parallel_filter();
   void weigh_second_pass();
   void apply_filter(SplitData& d) const;
@@ -353,7 +354,8 @@ class Diagnosis {
   bool cause_needed(size_t i, const std::vector<size_t>& set, bool base_free) const;
   void eliminate_backward(bool base_free = true);
   void decide_parameters();
-  Fit iv_refit(const std::vector<int>& causes, const Eigen::VectorXd& mask = Eigen::VectorXd());
+  // `on`: a split prepared like the fit split (chain_bias.cc's replay) fitted in its place, on the same instruments.
+  Fit iv_refit(const std::vector<int>& causes, const Eigen::VectorXd& mask = Eigen::VectorXd(), const SplitData* on = nullptr);
   Eigen::VectorXd away_from_reversals(double* half_width_s = nullptr) const;
   std::vector<int> kept_effects() const;
   // report_json.cc
@@ -482,6 +484,10 @@ class Diagnosis {
   void mark_nearest_candidates(nlohmann::json& report, const Eigen::VectorXd& r_test) const;
   std::set<std::string> nearest_candidate_joints(const std::pair<Eigen::VectorXd, Eigen::VectorXd>& written,
                                                  const std::set<std::string>& among) const;
+  // chain_bias.cc: the import's and diagnose's processing replayed on the model's own motion
+  Eigen::Index chain_edge_rows(const SplitData& s) const;
+  std::unique_ptr<SplitData> replayed_chain(const SplitData& s, std::string& why);
+  std::optional<Eigen::VectorXd> chain_bias(const std::vector<int>& causes, const Eigen::VectorXd& mask = Eigen::VectorXd());
   // verify.cc
   std::pair<Eigen::VectorXd, Eigen::VectorXd> verify(const std::string& out_dir, MjcfEdits& edits, std::vector<std::string>& notes,
                                                      const Eigen::VectorXd& final_pred_fit);
@@ -525,6 +531,10 @@ class Diagnosis {
   Fit parameters_fit_;                  // the free fit whose estimates decide `parameters` (ls or iv)
   std::string parameters_estimator_;    // "ls" or "iv", as it ran
   std::unique_ptr<SplitData> twin_;     // iv: the fit split on the model's simulated states
+  std::unique_ptr<SplitData> replayed_; // the fit split's chain replayed on the model's motion (chain_bias.cc; null: not known, chain_why_)
+  bool replay_tried_ = false;
+  std::string chain_why_;
+  nlohmann::json chain_bias_report_;    // report.json statistics.parameters_chain_bias (decide_parameters)
   nlohmann::json instruments_;          // iv: the tracking loop's bandwidth and RMS gap per joint
   mutable bool parameters_partial_ = false;   // some re-identified parameter has no MJCF attribute written
   std::optional<WrittenParameters> written_;  // set in build_report when `parameters` is named

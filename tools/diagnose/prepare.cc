@@ -8,7 +8,7 @@
 
 namespace spml::diagnose_detail {
 
-SplitData Diagnosis::prepare(const Split& s, const std::vector<Eigen::Index>& runs, const SplitData* continues) {
+SplitData Diagnosis::prepare(const Split& s, const std::vector<Eigen::Index>& runs, const SplitData* continues, bool filtered) {
   SplitData d;
   d.name = s.name;
   d.split = s;
@@ -55,7 +55,7 @@ SplitData Diagnosis::prepare(const Split& s, const std::vector<Eigen::Index>& ru
                          "'), " + fmt(kAbsurdTorqueRatio) + " times the measured torques' RMS (" + fmt(rms_torque) + ") or more: a declared value (a plugin's, "
                          "a joint's, a body's) is off by orders of magnitude");
   d.y0 = d.b - d.given;
-  apply_filter(d);
+  if (filtered) apply_filter(d);
   return d;
 }
 

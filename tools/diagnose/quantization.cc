@@ -40,10 +40,7 @@ Diagnosis::Requantized Diagnosis::requantized(const SplitData& split, const std:
     if (const auto d = parse_decimation_record(ds_.provenance.at("decimation"))) decimation = *d;
   const int keep = std::max(decimation.keep, 1);
   const double raw_rate = keep / median_step(t);
-  Eigen::Index settle = 0;   // raw samples the import's passes start up over
-  for (const auto& f : {lowpass, decimation.anti_alias})
-    if (f && f->cutoff_hz < 0.5 * raw_rate) settle += settling_samples(butterworth_lowpass(f->order, f->cutoff_hz, raw_rate));
-  out.edge_rows = settle / keep + (split.sos.empty() ? 0 : settling_samples(split.sos.sections)) + 2;
+  out.edge_rows = chain_edge_rows(split);
   const std::vector<std::string>& joints = reg_->joint_names();
   const std::vector<Eigen::Index> bounds = segment_bounds(X.rows(), split.runs);
   for (const double offset : offsets) {

@@ -305,6 +305,7 @@ void Diagnosis::build_report(const std::string& out_dir) {
                      {"parameters_delta_bic", parameters_delta_bic_}, {"parameters_delta_bic_per_joint", parameters_delta_bic_per_joint_}, {"parameters_contradicted", parameters_contradicted_},
                      {"parameters_contradicted_away_from_reversals", parameters_contradicted_away_},
                      {"parameters_z", parameters_z_},
+                     {"parameters_chain_bias", chain_bias_report_},
                      {"estimator", {{"parameters", parameters_estimator_.empty() ? "ls" : parameters_estimator_}, {"effects", "ls"}}}};
   if (!instruments_.is_null()) R["statistics"]["estimator"]["instruments"] = instruments_;
   const bool free = parameters_named_;

@@ -76,11 +76,17 @@ std::map<std::string, double> parse_position_steps(const std::string& text);
 // What spml import's --lowpass/--derive/--decimate make of one raw position log sampled at
 // `rate_hz`: the zero-phase `lowpass` (none: raw differences), two central differences, the
 // decimation's anti-alias pass on all three, every keep-th sample (import.cc's condition() on
-// one column, no edges dropped). For a consumer that needs the chain's effect on a position
-// error (diagnose's resolution floor), not for importing.
+// one column, no edges dropped). A `velocity` or `acceleration` given (raw, same rate) stands
+// for that state as the import was given it: low-passed in place of the difference, and the
+// acceleration then differenced from the given velocity. For a consumer that needs the chain's
+// effect on a position error (diagnose's resolution floor) or on a known motion (diagnose's
+// chain bias), not for importing.
 struct DerivedSignals {
   Eigen::VectorXd q, qd, qdd;
 };
-DerivedSignals derive_like_import(const Eigen::VectorXd& raw, double rate_hz, const std::optional<LowpassRecord>& lowpass, const DecimationRecord& decimation);
+DerivedSignals derive_like_import(const Eigen::VectorXd& raw, double rate_hz, const std::optional<LowpassRecord>& lowpass, const DecimationRecord& decimation,
+                                  const Eigen::VectorXd* velocity = nullptr, const Eigen::VectorXd* acceleration = nullptr);
+// The same chain without differences, for a column the import does not differentiate (a torque).
+Eigen::VectorXd condition_like_import(const Eigen::VectorXd& raw, double rate_hz, const std::optional<LowpassRecord>& lowpass, const DecimationRecord& decimation);
 
 }  // namespace spml
