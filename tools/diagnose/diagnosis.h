@@ -532,7 +532,7 @@ class Diagnosis {
   std::string parameters_estimator_;    // "ls" or "iv", as it ran
   std::unique_ptr<SplitData> twin_;     // iv: the fit split on the model's simulated states
   std::unique_ptr<SplitData> replayed_; // the fit split's chain replayed on the model's motion (chain_bias.cc; null: not known, chain_why_)
-  bool replay_tried_ = false;
+  bool replay_tried_ = false, chain_checked_ = false;
   std::string chain_why_;
   nlohmann::json chain_bias_report_;    // report.json statistics.parameters_chain_bias (decide_parameters)
   nlohmann::json instruments_;          // iv: the tracking loop's bandwidth and RMS gap per joint

@@ -550,8 +550,11 @@ void Diagnosis::decide_parameters() {
   const std::optional<Eigen::VectorXd> bias = chain_bias(effects);
   if (bias) parameters_fit_.coef.head(base_.rank) -= *bias;
   chain_bias_report_ = {{"applied", bias.has_value()}};
-  if (!bias) chain_bias_report_["why"] = chain_why_;
-  else {
+  if (!bias) {
+    chain_bias_report_["why"] = chain_why_;
+    if (ds_.provenance.count("derivatives") && !ds_.provenance.count("derived_columns"))   // said where a user reads (a review)
+      notes_.push_back("the processing chain's own bias is not taken out of the base parameters: " + chain_why_ + "; import the raw log again to have it measured");
+  } else {
     nlohmann::json per = nlohmann::json::object();
     double largest = 0;
     int at = -1;
