@@ -216,7 +216,7 @@ std::optional<Eigen::VectorXd> Diagnosis::chain_bias(const std::vector<int>& cau
   if (!replayed_) return std::nullopt;
   const SplitData& R = *replayed_;
   const auto O = static_cast<Eigen::Index>(R.y0.size() / std::max<Eigen::Index>(R.N, 1));
-  const Eigen::Index edge = chain_edge_rows(R) + kStencilHalf;   // replayed_chain keeps 2 edge rows and more between
+  const Eigen::Index edge = chain_edge_rows(R) + kStencilHalf;   // each record holds 4 (replayed_chain)
   Eigen::VectorXd inner = Eigen::VectorXd::Ones(R.y0.size());
   const std::vector<Eigen::Index> bounds = segment_bounds(R.N, R.runs);
   for (Eigen::Index o = 0; o < O; ++o)
