@@ -1906,6 +1906,19 @@ std::string fast_moves(const std::filesystem::path& dir, const std::vector<std::
   return reference;
 }
 
+// The exact hinge the fast moves are measured on (0.22 kg m^2 about its axis, DAMPING to fill).
+const char* kFastHinge = R"(<mujoco model="hinge">
+ <compiler angle="radian" inertiafromgeom="false"/>
+ <option timestep="0.001" gravity="0 0 0"><flag contact="disable"/></option>
+ <worldbody>
+  <body name="l1">
+   <joint name="a" type="hinge" axis="0 0 1" armature="0.1" damping="DAMPING"/>
+   <inertial pos="0.2 0 0" mass="2" diaginertia="0.004 0.04 0.04"/>
+  </body>
+ </worldbody>
+</mujoco>
+)";
+
 // A delay's correction resamples the torques at t + d; at each record's end the last rows have
 // no torque logged that late. Held there, a twenty-eighth review's fast moves (3-8 Hz, rows at
 // 200 Hz) had the test split's last row 9.4 N m off, 37 % of its joint's held-out sum of
@@ -1954,17 +1967,7 @@ TEST(DiagnoseBeyond, ADelayCorrectionKeepsTheRecordsEnds) {
 // ends as between them.
 TEST(DiagnoseBeyond, TheSplitsEndsHoldNoTransientOfTheSecondPass) {
   const auto dir = test::temp_dir("second_pass_ends");
-  const Case c = given_case(dir, R"(<mujoco model="hinge">
- <compiler angle="radian" inertiafromgeom="false"/>
- <option timestep="0.001" gravity="0 0 0"><flag contact="disable"/></option>
- <worldbody>
-  <body name="l1">
-   <joint name="a" type="hinge" axis="0 0 1" armature="0.1" damping="0.3"/>
-   <inertial pos="0.2 0 0" mass="2" diaginertia="0.004 0.04 0.04"/>
-  </body>
- </worldbody>
-</mujoco>
-)", 1);
+  const Case c = given_case(dir, filled(kFastHinge, "DAMPING", "0.3"), 1);
   Measurement m = issue_case_size();
   m.bits = 16;
   m.reference = fast_moves(dir, {"a"});
@@ -2006,20 +2009,9 @@ TEST(DiagnoseBeyond, TheSplitsEndsHoldNoTransientOfTheSecondPass) {
 // replay leaves of the deviation is what it does not model.
 TEST(DiagnoseBeyond, TheChainsOwnBiasIsTakenOutOfTheBaseParameters) {
   const auto dir = test::temp_dir("chain_bias");
-  const std::string hinge = R"(<mujoco model="hinge">
- <compiler angle="radian" inertiafromgeom="false"/>
- <option timestep="0.001" gravity="0 0 0"><flag contact="disable"/></option>
- <worldbody>
-  <body name="l1">
-   <joint name="a" type="hinge" axis="0 0 1" armature="0.1" damping="DAMPING"/>
-   <inertial pos="0.2 0 0" mass="2" diaginertia="0.004 0.04 0.04"/>
-  </body>
- </worldbody>
-</mujoco>
-)";
   const std::string inertia = "Izz:l1 + armature:a";
   {
-    const Case c = given_case(dir, filled(hinge, "DAMPING", "0"), 1);
+    const Case c = given_case(dir, filled(kFastHinge, "DAMPING", "0"), 1);
     Measurement m = issue_case_size();
     m.bits = 0, m.torque_noise = 0;
     m.reference = fast_moves(dir, {"a"});
@@ -2032,7 +2024,7 @@ TEST(DiagnoseBeyond, TheChainsOwnBiasIsTakenOutOfTheBaseParameters) {
     EXPECT_GT(read, 1e-3 * model);                       // the chain's bias is there to take out
     EXPECT_LE(std::fabs(left), 0.15 * std::fabs(read));  // and the replay measures it
   }
-  const Case c = given_case(dir, filled(hinge, "DAMPING", "0.3"), 1);
+  const Case c = given_case(dir, filled(kFastHinge, "DAMPING", "0.3"), 1);
   Measurement m = issue_case_size();
   m.bits = 16;
   m.reference = fast_moves(dir, {"a"});

@@ -72,20 +72,24 @@ Hermite quintic(double s, double h, double p0, double v0, double a0, double p1, 
 
 }  // namespace
 
+Diagnosis::ImportChain Diagnosis::import_chain() const {
+  ImportChain c;
+  if (ds_.provenance.count("filter")) c.lowpass = parse_lowpass_record(ds_.provenance.at("filter"));
+  if (ds_.provenance.count("decimation"))
+    if (const auto d = parse_decimation_record(ds_.provenance.at("decimation"))) c.decimation = *d;
+  return c;
+}
+
 // The import's low-pass, anti-alias and decimation reach this many of a split's rows at each
 // end of a record, and diagnose's own filter (settling, in rows) this many more.
 Eigen::Index Diagnosis::chain_edge_rows(const SplitData& s) const {
-  std::optional<LowpassRecord> lowpass;
-  if (ds_.provenance.count("filter")) lowpass = parse_lowpass_record(ds_.provenance.at("filter"));
-  DecimationRecord decimation;
-  if (ds_.provenance.count("decimation"))
-    if (const auto d = parse_decimation_record(ds_.provenance.at("decimation"))) decimation = *d;
-  const int keep = std::max(decimation.keep, 1);
+  const ImportChain chain = import_chain();
+  const int keep = chain.keep();
   const double step = s.split.t.size() > 1 ? median_step(s.split.t) : 0;
   if (!(step > 0)) return 0;
   const double raw_rate = keep / step;
   Eigen::Index settle = 0;   // raw samples the import's passes start up over
-  for (const auto& f : {lowpass, decimation.anti_alias})
+  for (const auto& f : {chain.lowpass, chain.decimation.anti_alias})
     if (f && f->cutoff_hz < 0.5 * raw_rate) settle += settling_samples(butterworth_lowpass(f->order, f->cutoff_hz, raw_rate));
   return settle / keep + (s.sos.empty() ? 0 : settling_samples(s.sos.sections)) + 2;
 }
@@ -111,12 +115,8 @@ std::unique_ptr<SplitData> Diagnosis::replayed_chain(const SplitData& s, std::st
     std::istringstream in(prov.at("derived_columns"));
     for (std::string c; in >> c;) derived.insert(c);
   }
-  std::optional<LowpassRecord> lowpass;
-  if (prov.count("filter")) lowpass = parse_lowpass_record(prov.at("filter"));
-  DecimationRecord decimation;
-  if (prov.count("decimation"))
-    if (const auto d = parse_decimation_record(prov.at("decimation"))) decimation = *d;
-  const int keep = std::max(decimation.keep, 1);
+  const ImportChain chain = import_chain();
+  const int keep = chain.keep();
   // Where the parallel filter decides column by column (its probe: smooth columns left as the
   // states made them, switching ones filtered again), the replay's columns, free of the log's
   // noise, are not decided alike: a review's fast moves through a 10 Hz import read the replayed
@@ -154,25 +154,23 @@ std::unique_ptr<SplitData> Diagnosis::replayed_chain(const SplitData& s, std::st
     raw.X.resize(Lr, in.X.cols());
     raw.Y.resize(Lr, in.Y.cols());
     raw.t.resize(Lr);
-    // Linear between the rows: the time, the torques (prepare() checks the model's against
-    // them), any column that is no joint state.
+    const auto& cols = *s.cols;
+    std::vector<Eigen::VectorXd> p(joints.size()), v(joints.size()), a(joints.size());   // per joint: the nodes
+    for (size_t j = 0; j < joints.size(); ++j) {
+      p[j] = in.X.col(cols.q[j]).segment(b, L);
+      node_derivatives(p[j], h, v[j], a[j]);
+    }
     for (Eigen::Index i = 0; i < Lr; ++i) {
       const Eigen::Index n = std::min<Eigen::Index>(i / keep, L - 2);
       const double f = static_cast<double>(i - n * keep) / keep;
+      // Linear between the rows: the time, the torques (prepare() checks the model's against
+      // them), any column that is no joint state; the joints' states on the quintic.
       raw.t[i] = (1 - f) * in.t[b + n] + f * in.t[b + n + 1];
       raw.X.row(i) = (1 - f) * in.X.row(b + n) + f * in.X.row(b + n + 1);
       raw.Y.row(i) = (1 - f) * in.Y.row(b + n) + f * in.Y.row(b + n + 1);
-    }
-    const auto& cols = *s.cols;
-    for (size_t j = 0; j < joints.size(); ++j) {
-      const int qc = cols.q[j], vc = cols.qd[j], ac = cols.qdd[j];
-      const Eigen::VectorXd p = in.X.col(qc).segment(b, L);
-      Eigen::VectorXd v, a;
-      node_derivatives(p, h, v, a);
-      for (Eigen::Index i = 0; i < Lr; ++i) {
-        const Eigen::Index n = std::min<Eigen::Index>(i / keep, L - 2);
-        const Hermite m = quintic(static_cast<double>(i - n * keep) / keep, h, p[n], v[n], a[n], p[n + 1], v[n + 1], a[n + 1]);
-        raw.X(i, qc) = m.p, raw.X(i, vc) = m.v, raw.X(i, ac) = m.a;
+      for (size_t j = 0; j < joints.size(); ++j) {
+        const Hermite m = quintic(f, h, p[j][n], v[j][n], a[j][n], p[j][n + 1], v[j][n + 1], a[j][n + 1]);
+        raw.X(i, cols.q[j]) = m.p, raw.X(i, cols.qd[j]) = m.v, raw.X(i, cols.qdd[j]) = m.a;
       }
     }
     SplitData exact;
@@ -183,12 +181,12 @@ std::unique_ptr<SplitData> Diagnosis::replayed_chain(const SplitData& s, std::st
       return nullptr;
     }
     for (Eigen::Index o = 0; o < in.Y.cols(); ++o)
-      out.Y.col(o).segment(b, L) = condition_like_import(exact.given.segment(o * Lr, Lr), raw_rate, lowpass, decimation);
+      out.Y.col(o).segment(b, L) = condition_like_import(exact.given.segment(o * Lr, Lr), raw_rate, chain.lowpass, chain.decimation);
     for (size_t j = 0; j < joints.size(); ++j) {
       const int qc = cols.q[j], vc = cols.qd[j], ac = cols.qdd[j];
       const Eigen::VectorXd v = raw.X.col(vc), a = raw.X.col(ac);
       const bool dv = derived.count("qd:" + joints[j]) > 0, da = derived.count("qdd:" + joints[j]) > 0;
-      const DerivedSignals d = derive_like_import(raw.X.col(qc), raw_rate, lowpass, decimation, dv ? nullptr : &v, da ? nullptr : &a);
+      const DerivedSignals d = derive_like_import(raw.X.col(qc), raw_rate, chain.lowpass, chain.decimation, dv ? nullptr : &v, da ? nullptr : &a);
       out.X.col(qc).segment(b, L) = d.q;
       out.X.col(vc).segment(b, L) = d.qd;
       out.X.col(ac).segment(b, L) = d.qdd;
@@ -209,7 +207,8 @@ std::unique_ptr<SplitData> Diagnosis::replayed_chain(const SplitData& s, std::st
 // there; the log did not) and so are those `mask` leaves out. Nothing (the reason in
 // chain_why_) where the chain is not known.
 std::optional<Eigen::VectorXd> Diagnosis::chain_bias(const std::vector<int>& causes, const Eigen::VectorXd& mask) {
-  if (!replay_tried_) {
+  const bool first = !replay_tried_;
+  if (first) {
     replay_tried_ = true;
     replayed_ = replayed_chain(fit_, chain_why_);
   }
@@ -225,10 +224,9 @@ std::optional<Eigen::VectorXd> Diagnosis::chain_bias(const std::vector<int>& cau
       inner.segment(o * R.N + b, edge).setZero();
       inner.segment(o * R.N + b + L - edge, edge).setZero();
     }
-  if (!chain_checked_) {
+  if (first) {
     // The chain alone can leave no more than the log's residual with the model as given, which
     // holds it and the noise: where it leaves more on a joint, the replay is not the log's chain.
-    chain_checked_ = true;
     for (Eigen::Index o = 0; o < O; ++o) {
       const auto seg = [&](const Eigen::VectorXd& v) { return v.segment(o * R.N, R.N).cwiseProduct(inner.segment(o * R.N, R.N)).norm(); };
       if (seg(R.y0) > seg(fit_.y0)) {

@@ -462,7 +462,7 @@ class Diagnosis {
   Eigen::VectorXd returned_levels(const SplitData& s, const std::vector<int>& causes) const;
   bool own_level_parameter(int i, const std::vector<int>& joints) const;
   std::optional<BlockColumns> base_without_taken(const BlockColumns& base, const std::vector<int>& causes) const;
-  TakenBase taken_base(const std::vector<int>& causes) const;
+  TakenBase taken_base(const std::vector<int>& causes, const SplitData* on = nullptr) const;
   bool taken_level(int i, const std::vector<int>& causes) const;
   Fit level_held(int k, const Fit& current, const std::vector<int>& chosen) const;
   MjcfEdits with_take_over(const MjcfEdits& e, const MjcfEdits* takers = nullptr) const;
@@ -485,6 +485,12 @@ class Diagnosis {
   std::set<std::string> nearest_candidate_joints(const std::pair<Eigen::VectorXd, Eigen::VectorXd>& written,
                                                  const std::set<std::string>& among) const;
   // chain_bias.cc: the import's and diagnose's processing replayed on the model's own motion
+  struct ImportChain {   // what the dataset records spml import ran its columns through
+    std::optional<LowpassRecord> lowpass;
+    DecimationRecord decimation;
+    int keep() const { return std::max(decimation.keep, 1); }
+  };
+  ImportChain import_chain() const;
   Eigen::Index chain_edge_rows(const SplitData& s) const;
   std::unique_ptr<SplitData> replayed_chain(const SplitData& s, std::string& why);
   std::optional<Eigen::VectorXd> chain_bias(const std::vector<int>& causes, const Eigen::VectorXd& mask = Eigen::VectorXd());
@@ -532,7 +538,7 @@ class Diagnosis {
   std::string parameters_estimator_;    // "ls" or "iv", as it ran
   std::unique_ptr<SplitData> twin_;     // iv: the fit split on the model's simulated states
   std::unique_ptr<SplitData> replayed_; // the fit split's chain replayed on the model's motion (chain_bias.cc; null: not known, chain_why_)
-  bool replay_tried_ = false, chain_checked_ = false;
+  bool replay_tried_ = false;
   std::string chain_why_;
   nlohmann::json chain_bias_report_;    // report.json statistics.parameters_chain_bias (decide_parameters)
   nlohmann::json instruments_;          // iv: the tracking loop's bandwidth and RMS gap per joint

@@ -166,12 +166,13 @@ std::optional<BlockColumns> Diagnosis::base_without_taken(const BlockColumns& ba
   return out;
 }
 
-// The base block and targets of a fit with `causes` on the fit split: fit_'s, or where they
-// take over own levels, the base without those levels (base_without_taken) and their force
-// returned to the targets.
-TakenBase Diagnosis::taken_base(const std::vector<int>& causes) const {
-  TakenBase t{base_without_taken(fit_.base, causes), fit_.y0};
-  if (const Eigen::VectorXd returned = returned_levels(fit_, causes); returned.size()) t.y += returned;
+// The base block and targets of a fit with `causes` on the fit split (or `on`, a split
+// prepared like it): its own, or where they take over own levels, the base without those levels
+// (base_without_taken) and their force returned to the targets.
+TakenBase Diagnosis::taken_base(const std::vector<int>& causes, const SplitData* on) const {
+  const SplitData& s = on ? *on : fit_;
+  TakenBase t{base_without_taken(s.base, causes), s.y0};
+  if (const Eigen::VectorXd returned = returned_levels(s, causes); returned.size()) t.y += returned;
   return t;
 }
 

@@ -33,12 +33,8 @@ Diagnosis::Requantized Diagnosis::requantized(const SplitData& split, const std:
   const RowMatrix& X = split.split.X;
   const Eigen::VectorXd& t = split.split.t;
   if (steps.empty() || t.size() != X.rows() || X.rows() < 8) return out;
-  std::optional<LowpassRecord> lowpass;
-  if (ds_.provenance.count("filter")) lowpass = parse_lowpass_record(ds_.provenance.at("filter"));
-  DecimationRecord decimation;
-  if (ds_.provenance.count("decimation"))
-    if (const auto d = parse_decimation_record(ds_.provenance.at("decimation"))) decimation = *d;
-  const int keep = std::max(decimation.keep, 1);
+  const ImportChain chain = import_chain();
+  const int keep = chain.keep();
   const double raw_rate = keep / median_step(t);
   out.edge_rows = chain_edge_rows(split);
   const std::vector<std::string>& joints = reg_->joint_names();
@@ -64,7 +60,7 @@ Diagnosis::Requantized Diagnosis::requantized(const SplitData& split, const std:
           }
         }
         err[err.size() - 1] = error(X(b + L - 1, qc));
-        const DerivedSignals d = derive_like_import(err, raw_rate, lowpass, decimation);
+        const DerivedSignals d = derive_like_import(err, raw_rate, chain.lowpass, chain.decimation);
         E.col(qc).segment(b, L) += d.q;
         E.col(vc).segment(b, L) += d.qd;
         E.col(split.cols->qdd[k]).segment(b, L) += d.qdd;

@@ -685,11 +685,9 @@ Fit Diagnosis::iv_refit(const std::vector<int>& causes, const Eigen::VectorXd& m
     return &m;
   };
   // The own levels the causes take over are in no fit with them (own_friction.cc).
-  TakenBase taken = taken_base(causes);
+  const TakenBase taken = taken_base(causes, on);
   std::vector<const BlockColumns*> F;
   if (on) {   // the same fit on another split prepared like the fit split
-    taken = {base_without_taken(on->base, causes), on->y0};
-    if (const Eigen::VectorXd returned = returned_levels(*on, causes); returned.size()) taken.y += returned;
     F.push_back(use(taken.base ? *taken.base : on->base));
     for (int c : causes) F.push_back(use(owned.emplace_back(columns_of(cands_[static_cast<size_t>(c)], *on))));
   } else {
