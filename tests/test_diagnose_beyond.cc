@@ -2043,6 +2043,80 @@ TEST(DiagnoseBeyond, TheChainsOwnBiasIsTakenOutOfTheBaseParameters) {
   EXPECT_TRUE(named(r).empty()) << joined(named(r));
 }
 
+// MuJoCo's frictionloss is a soft constraint whose torque switches with qd + qdd dmax timeconst / 2
+// (9.5 ms ahead at the default solref), not with qd as the coulomb column does. Under 3-8 Hz
+// moves a frictionloss the model lacked, named `coulomb` and written as its declaration, left
+// the hinge's fresh log much of what the model as given had (a review's vertical slide carrying
+// a hinge: 0.78 % of the torque, the true model 0.28 %). The written form is the data's choice
+// (choose_coulomb_form): here frictionloss, which plain MuJoCo simulates. Judged as a user would,
+// on a log of another seed, against the same level written as the declaration. (A hinge alone
+// under these moves, 0.22 kg m^2, gets `parameters` and `stick_slip` named instead: README,
+// known wrong answers.)
+TEST(DiagnoseBeyond, AMissingFrictionlossIsWrittenAsFrictionloss) {
+  const auto dir = test::temp_dir("frictionloss_form");
+  const std::string given = R"(<mujoco model="vertical slide and hinge">
+ <compiler angle="radian" inertiafromgeom="false"/>
+ <option timestep="0.001" gravity="0 0 -9.81"><flag contact="disable"/></option>
+ <worldbody>
+  <body name="carriage">
+   <joint name="z" type="slide" axis="0 0 1" armature="0.5" damping="5"/>
+   <inertial pos="0 0 0" mass="4" diaginertia="0.02 0.02 0.02"/>
+   <body name="arm">
+    <joint name="a" type="hinge" axis="0 -1 0" armature="0.03" damping="0.3"/>
+    <inertial pos="0.15 0 0" mass="1.2" diaginertia="0.002 0.012 0.012"/>
+   </body>
+  </body>
+ </worldbody>
+</mujoco>
+)";
+  const Case c = given_case(dir, given, 2, filled(given, "damping=\"0.3\"", "damping=\"0.3\" frictionloss=\"0.15\""));
+  Measurement m = issue_case_size();
+  m.bits = 16;
+  m.reference = fast_moves(dir, {"z", "a"});
+  DiagnoseOptions opt;
+  opt.model = c.user;
+  opt.data = measured(c, (dir / "fit.h5").string(), 1, m);
+  opt.rollouts = 0;
+  const auto out = dir / "out";
+  const nlohmann::json r = diagnose(opt, out.string()).report;
+  const nlohmann::json* coulomb = nullptr;
+  for (const auto& cause : r["causes"])
+    if (cause["effect"] == "coulomb" && !cause.contains("superseded_by") && !cause.contains("rejected")) coulomb = &cause;
+  ASSERT_NE(coulomb, nullptr) << joined(named(r));
+  EXPECT_EQ(coulomb->value("written_as", ""), "mjcf") << coulomb->dump();
+  ASSERT_TRUE(coulomb->contains("written_form_check")) << coulomb->dump();
+  const nlohmann::json& check = (*coulomb)["written_form_check"];
+  EXPECT_TRUE(check["frictionloss"].get<bool>()) << check.dump();
+  EXPECT_TRUE(r["needs_spml_plugins"].empty()) << r["needs_spml_plugins"].dump();
+  const std::string written_xml = (out / "extended.xml").string();
+  ModelPtr w = load_mjcf(written_xml);
+  const double level = w->dof_frictionloss[w->jnt_dofadr[mj_name2id(w.get(), mjOBJ_JOINT, "a")]];
+  EXPECT_NEAR(level, 0.15, 0.3 * 0.15);   // the ideal column's fit reads it low: the soft zone
+  // The same level as the declaration, for the comparison.
+  const std::string declared_xml = (dir / "declared.xml").string();
+  {
+    std::string text = test::read_file(written_xml);
+    const std::string attr = " frictionloss=\"";
+    const auto at = text.find(attr);
+    ASSERT_NE(at, std::string::npos);
+    text.erase(at, text.find('"', at + attr.size()) + 1 - at);
+    std::ofstream(declared_xml) << test::with_declarations(text, {"type=coulomb joints=a fc=" + test::num(level) + " smooth=0"});
+  }
+  const std::string fresh = measured(c, (dir / "fresh.h5").string(), 2, m);
+  auto held_out = [&](const std::string& model) {
+    DiagnoseOptions o;
+    o.model = model;
+    o.data = fresh;
+    o.rollouts = 0;
+    return diagnose(o, "").report["baseline"]["rel_error_test"]["a"].get<double>();
+  };
+  const double as_frictionloss = held_out(written_xml), as_declared = held_out(declared_xml), true_model = held_out(c.truth);
+  std::cout << "  fresh log, the hinge's held-out error: written " << 100 * as_frictionloss << " %, the level as a declaration "
+            << 100 * as_declared << " %, the true model " << 100 * true_model << " % (level " << level << " for 0.15)\n";
+  EXPECT_LT(as_frictionloss, as_declared);
+  EXPECT_LE(as_frictionloss, 1.5 * true_model);
+}
+
 // An effect outside the vocabulary that the vocabulary takes most of is said to be so. A
 // nineteenth review's tendon spring from the world to the forearm of the 5-joint arm was read
 // as `parameters` (the upper arm written 12.45 kg for 4) and a spring on the base; they took

@@ -218,7 +218,7 @@ TEST(DiagnoseCases, SpringAndViscousAreWrittenAsMuJoCosOwnAttributes) {
     std::ofstream(model) << "<mujoco>" << (degrees ? "" : "<compiler angle=\"radian\"/>") << "<option gravity=\"0 0 0\"/><worldbody>\n"
                             "  <body name=\"A\"><joint name=\"a\" type=\"hinge\" axis=\"0 0 1\" damping=\"0.5\" stiffness=\"2\" springref=\""
                          << test::num(degrees ? ra * 180 / M_PI : ra) << "\"/><inertial pos=\"0 0 0\" mass=\"1\" diaginertia=\"1 1 1\"/></body>\n"
-                            "  <body name=\"B\"><joint name=\"b\" type=\"hinge\" axis=\"0 0 1\" damping=\"0.2\"/><inertial pos=\"0 0 0\" mass=\"1\" diaginertia=\"1 1 1\"/></body>\n"
+                            "  <body name=\"B\"><joint name=\"b\" type=\"hinge\" axis=\"0 0 1\" damping=\"0.2\" frictionloss=\"0.1\"/><inertial pos=\"0 0 0\" mass=\"1\" diaginertia=\"1 1 1\"/></body>\n"
                             "  <body name=\"C\"><joint name=\"c\" type=\"slide\" axis=\"1 0 0\" damping=\"0.3\"/><inertial pos=\"0 0 0\" mass=\"1\" diaginertia=\"1 1 1\"/></body>\n"
                             "</worldbody></mujoco>\n";
     EXPECT_EQ(mjcf_angles_in_degrees(model), degrees);
@@ -268,6 +268,32 @@ TEST(DiagnoseCases, SpringAndViscousAreWrittenAsMuJoCosOwnAttributes) {
     EXPECT_EQ(included.edits.texts.size(), 4u);
     EXPECT_EQ(included.as_mjcf.size(), 1u);   // the spring on c
     EXPECT_NE(included.kept_why.at("type=spring joints=a k=3 f0=0.4").find("not defined in the model file itself"), std::string::npos);
+    // An exact Coulomb level is MuJoCo's frictionloss only on the joints the data chose it for
+    // (choose_coulomb_form), on top of the joint's own level or what the edits set there (a
+    // level taken over: 0); a smoothed one, one on a joint not chosen and one whose total would
+    // be negative stay declarations.
+    MjcfEdits f;
+    f.joint_attributes["c"]["frictionloss"] = 0;
+    f.texts = {{"spml.plugin.diagnosed_coulomb_b", "type=coulomb joints=b fc=0.3"},
+               {"spml.plugin.diagnosed_coulomb_c", "type=coulomb joints=c fc=0.2 smooth=0"},
+               {"spml.plugin.diagnosed_coulomb_a", "type=coulomb joints=a fc=0.1 smooth=0.05"}};
+    const diagnose_detail::WrittenForm plain = diagnose_detail::mujoco_form(given.get(), degrees, {"a", "b", "c"}, f);
+    EXPECT_EQ(plain.edits.texts.size(), 3u);
+    const diagnose_detail::WrittenForm fl = diagnose_detail::mujoco_form(given.get(), degrees, {"a", "b", "c"}, f, {"a", "b", "c"});
+    ASSERT_EQ(fl.edits.texts.size(), 1u);
+    EXPECT_EQ(fl.edits.texts[0].first, "spml.plugin.diagnosed_coulomb_a");
+    EXPECT_DOUBLE_EQ(fl.edits.joint_attributes.at("b").at("frictionloss"), 0.1 + 0.3);   // b's own 0.1
+    EXPECT_DOUBLE_EQ(fl.edits.joint_attributes.at("c").at("frictionloss"), 0.2);
+    EXPECT_DOUBLE_EQ(fl.as_mjcf.at("type=coulomb joints=b fc=0.3")["frictionloss_before"].get<double>(), 0.1);
+    const auto fl_path = dir / (degrees ? "deg_fl.xml" : "rad_fl.xml");
+    std::ofstream(fl_path) << edit_mjcf(model, fl.edits, notes);
+    ModelPtr mf = load_mjcf(fl_path.string());
+    EXPECT_DOUBLE_EQ(mf->dof_frictionloss[1], 0.4);
+    EXPECT_DOUBLE_EQ(mf->dof_frictionloss[2], 0.2);
+    f.texts = {{"spml.plugin.diagnosed_coulomb_b", "type=coulomb joints=b fc=-0.5"}};
+    const diagnose_detail::WrittenForm negative = diagnose_detail::mujoco_form(given.get(), degrees, {"a", "b", "c"}, f, {"b"});
+    EXPECT_EQ(negative.edits.texts.size(), 1u);
+    EXPECT_NE(negative.kept_why.at("type=coulomb joints=b fc=-0.5").find("< 0"), std::string::npos);
   }
 }
 
@@ -1103,7 +1129,15 @@ TEST(DiagnoseCases, AShiftOnlyOneJointAsksForIsNoDelay) {
   EXPECT_EQ(r["delay"]["joints_left_out"], nlohmann::json::array({"shoulder"})) << r["delay"].dump();
   for (const char* j : {"yaw", "elbow"})   // no worse held out than as given (a tenth of margin)
     EXPECT_LT(r["final"]["rel_error_test"][j].get<double>(), 1.1 * r["baseline"]["rel_error_test"][j].get<double>()) << j << " " << r["final"].dump();
-  EXPECT_TRUE(r["unexplained"].empty()) << r["unexplained"].dump();
+  // Nothing unexplained on the joints the wrong shift had moved. The shoulder's Coulomb level,
+  // written as MuJoCo's frictionloss (it fits the fit split better so: 1.66 % of the shoulder's
+  // torque against 2.08 %; held out 2.39 % against 2.72 %), leaves the curve's hump, and a GP
+  // over the states predicts 34 % of that residual held out, through the shoulder's velocity:
+  // said so, which is what the data hold.
+  for (const auto& u : r["unexplained"]) {
+    EXPECT_EQ(u["joint"], "shoulder") << r["unexplained"].dump();
+    EXPECT_EQ(u["inputs"][0], "qd:shoulder") << r["unexplained"].dump();
+  }
   // The log again, its torques 5 ticks late (1 kHz): `delay` within a millisecond, and the
   // joints as well predicted as on the log without the lag.
   const std::string h5 = lagged_log(dir, "log", 5, kReviewArmImport);

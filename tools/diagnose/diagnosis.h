@@ -249,8 +249,12 @@ struct WrittenForm {
 // (damping >= 0 in total) on a hinge or slide joint of m turned into that joint's attributes, on
 // top of what the edits already write there or else m's own values; `degrees`: the file states
 // hinge angles in degrees (springref is written in them); `defined`: the joints the file itself
-// defines (others keep their declarations: their attributes cannot be written).
-WrittenForm mujoco_form(const mjModel* m, bool degrees, const std::vector<std::string>& defined, const MjcfEdits& edits);
+// defines (others keep their declarations: their attributes cannot be written);
+// `frictionloss_joints`: the joints whose diagnosed exact Coulomb level (coulomb, smooth 0) is
+// written as MuJoCo's frictionloss, on top of the joint's own, when that total is >= 0 (the
+// form is chosen by the data: Diagnosis::choose_coulomb_form).
+WrittenForm mujoco_form(const mjModel* m, bool degrees, const std::vector<std::string>& defined, const MjcfEdits& edits,
+                        const std::set<std::string>& frictionloss_joints = {});
 
 // "effect@joint" (or "parameters") of every cause rejected in simulation (confirm.cc).
 nlohmann::json rejected_causes(const nlohmann::json& causes);
@@ -376,6 +380,8 @@ class Diagnosis {
   // `takers`: the edits whose causes take over their joints' own levels (own_friction.cc; default: edits)
   std::string write_model(const MjcfEdits& edits, std::vector<std::string>& notes, const MjcfEdits* takers = nullptr) const;
   nlohmann::json report_written_form(const MjcfEdits& edits, std::vector<std::string>& notes);
+  void choose_coulomb_form(const std::string& ext_path, MjcfEdits& edits, std::vector<std::string>& notes,
+                           std::pair<Eigen::VectorXd, Eigen::VectorXd>& written);
   // confirm.cc
   bool confirm_in_simulation(const std::string& ext_path, MjcfEdits& edits);
   void note_rejections(const MjcfEdits& edits, std::vector<std::string>& notes);
@@ -552,6 +558,7 @@ class Diagnosis {
   mutable std::map<std::string, double> gp_share_at_floor_;           // what the GP predicted on joints left at their floor (unexplained)
   mutable std::optional<bool> degrees_;   // the model file's hinge angles in degrees (written_form.cc)
   mutable std::optional<std::vector<std::string>> defined_joints_;   // the joints the model file itself defines (written_form.cc)
+  std::set<std::string> frictionloss_joints_;   // joints whose Coulomb level extended.xml states as frictionloss (choose_coulomb_form)
   // #22: the states the stateful simulations read, one per thread at a time, kept between calls
   // (making one costs more than a whole pass along a split).
   struct SimDataPool {

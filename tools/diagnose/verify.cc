@@ -141,6 +141,7 @@ std::pair<Eigen::VectorXd, Eigen::VectorXd> Diagnosis::verify(const std::string&
   R["parameters_written"] = !parameters_named_ ? "none" : parameters_partial_ ? "partial" : "all";
   if (parameters_partial_) choose_partial(ext_path, edits, notes_all, written);
   if (write_listed_terms(edits, true, "")) written = write_scored(ext_path, edits, notes_all);
+  choose_coulomb_form(ext_path, edits, notes_all, written);
   notes = notes_all;
   // The effects are fitted again with the parameters written (and checked by their plugins),
   // before the confirmation in simulation: it judges the model extended.xml states. (Judged at
