@@ -241,16 +241,22 @@ std::string report_markdown(const nlohmann::json& r, bool with_plots) {
     if (c.contains("replaces_model_friction"))
       s << " - replaces the model's own friction level " << values_text(c["replaces_model_friction"]) << " (0 in extended.xml)";
     s << "\n   - " << params_text(c, "\n   - ") << "\n";
-    if (c.value("written_as", "") == "mjcf") {   // a spring or viscous friction in MuJoCo's own terms (written_form.cc)
+    if (c.value("written_as", "") == "mjcf") {   // a spring, viscous or Coulomb friction in MuJoCo's own terms (written_form.cc)
       const auto& m = c["mjcf"];
       s << "   - in extended.xml as MuJoCo's own attributes of joint " << m["joint"].get<std::string>() << ":";
       if (m.contains("damping")) s << " damping " << num(m["damping"].get<double>());
+      if (m.contains("frictionloss")) s << " frictionloss " << num(m["frictionloss"].get<double>());
       if (m.contains("stiffness"))
         s << " stiffness " << num(m["stiffness"].get<double>()) << ", springref " << num(m["springref"].get<double>()) << " "
           << m["springref_unit"].get<std::string>();
       s << "\n";
     } else if (c.value("written_as", "") == "plugin") {
       s << "   - in extended.xml as an spml plugin declaration (plain MuJoCo ignores it)\n";
+    }
+    if (c.contains("written_form_check")) {
+      const auto& w = c["written_form_check"];
+      s << "   - its joint's fit-split error written as frictionloss " << pct(w["rel_error_fit_frictionloss"].get<double>()) << ", as the declaration "
+        << pct(w["rel_error_fit_declaration"].get<double>()) << "\n";
     }
     if (c["effect"] == "parameters" && c.contains("written") && !c.contains("rejected")) s << written_parameters_text(c["written"]);
     if (c.contains("resolution")) s << "   - " << c["resolution"].get<std::string>() << "\n";
